@@ -1,0 +1,53 @@
+"""Choose the default smoothing radius k from the real clips (README, "Choosing k").
+
+For each clip: one motion pass, then for each k the smoothed path's residual jitter (the same
+high-pass measure as pipeline.metrics: RMS of the path minus its Gaussian low-pass with sigma = fps/2
+frames) and the crop it costs (area kept by the largest window valid in every frame).
+Usage: python benchmarks/choose_k.py [CLIPS...]   (default: every clip in ../shared/videos)
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from pipeline import motion, smoothing, stabilize, video_io, warping
+from pipeline.observer import NullObserver, null_progress
+
+RADII = (0, 4, 6, 10, 15, 20, 30, 45)
+VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+
+
+def high_pass_rms(path_xy: np.ndarray, fps: float) -> float:
+    low = gaussian_filter1d(path_xy, sigma=fps / 2.0, axis=0, mode="nearest")
+    return float(np.sqrt(np.mean(np.sum((path_xy - low) ** 2, axis=1))))
+
+
+def main(argv: list[str]) -> int:
+    clips = [Path(a) for a in argv] or sorted(p for p in VIDEOS.iterdir() if p.suffix in (".mp4", ".avi"))
+    print(f"{'clip':34s} " + " ".join(f"k={k:<2d} jit/crop" for k in RADII))
+    table = []
+    for clip in clips:
+        info = video_io.probe_video(clip)
+        passed = stabilize.estimate_motion(clip, motion.MotionConfig(), observer=NullObserver(),
+                                           progress=null_progress, total=None)
+        row = []
+        for k in RADII:
+            result = smoothing.smooth(passed.curr_from_prev, smoothing.SmoothingConfig(radius=k), cuts=passed.cuts,
+                                      width=info.width, height=info.height)
+            jitter = high_pass_rms(result.smoothed_trajectory[:, :2], float(info.fps))
+            window = warping.largest_crop(result.orig_from_stab, info.width, info.height)
+            row.append((jitter, window.cropping_ratio if window else 0.0))
+        table.append(row)
+        print(f"{clip.name:34s} " + " ".join(f"{j:5.2f}/{c:4.2f}  " for j, c in row), flush=True)
+    jit = np.array([[j for j, _ in row] for row in table])
+    crop = np.array([[c for _, c in row] for row in table])
+    print(f"{'median':34s} " + " ".join(f"{j:5.2f}/{c:4.2f}  " for j, c in zip(np.median(jit, 0), np.median(crop, 0))))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

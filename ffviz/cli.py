@@ -1,0 +1,202 @@
+"""The `ffviz` command: a thin layer over pipeline/ and the recorder.
+
+Expected failures (pipeline.errors.FFVizError) print one line and exit non-zero; Ctrl-C and SIGTERM
+leave no partial output (writers abort on any exception) and exit 130/143.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import traceback
+from pathlib import Path
+from typing import Sequence
+
+from pipeline import motion, smoothing, stabilize as stab
+from pipeline.errors import ConfigError, FFVizError
+from pipeline.observer import Observer, Observers
+
+DEFAULT_RECORDINGS = Path("recordings")
+
+
+class Terminated(Exception):
+    """Raised in the main thread on SIGTERM so the same cleanup as Ctrl-C runs."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise Terminated()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ffviz", description=__doc__.splitlines()[0])
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = commands.add_parser("stabilize", help="stabilize a video")
+    p.add_argument("input", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help="output video (.mp4, .mov or .mkv)")
+    _add_stabilize_options(p)
+    p.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+
+    p = commands.add_parser("demo", help="generate a synthetic shaky video with ground truth and stabilize it")
+    p.add_argument("-o", "--output-dir", type=Path, default=Path("ffviz-demo"), help="where to write (default: %(default)s)")
+    p.add_argument("--frames", type=int, default=120, help="number of frames to generate (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0)
+    _add_stabilize_options(p, default_rrd=DEFAULT_RECORDINGS / "demo.rrd")
+
+    p = commands.add_parser("metrics", help="stabilization metrics of OUTPUT against INPUT (Liu et al. 2013)")
+    p.add_argument("input", type=Path)
+    p.add_argument("output", type=Path)
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+    p = commands.add_parser("view", help="open a recording in the Rerun viewer (web viewer on 127.0.0.1)")
+    p.add_argument("recording", type=Path)
+    p.add_argument("--native", action="store_true", help="use the desktop viewer instead of the web viewer")
+    p.add_argument("--web-port", type=int, default=9090)
+    p.add_argument("--grpc-port", type=int, default=9876)
+    return parser
+
+
+def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None = None) -> None:
+    p.add_argument("--mode", choices=stab.OUTPUT_MODES, default="crop",
+                   help="none: missing areas left black; crop: largest window valid in every frame, "
+                        "scaled back to full size (default: %(default)s)")
+    p.add_argument("--smoothing-radius", "-k", type=int, default=smoothing.DEFAULT_RADIUS, metavar="K",
+                   help="neighbours on each side in the Gaussian of eq. 18 (default: %(default)s)")
+    p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
+                   help="Gaussian sigma in frames (default: sqrt(K))")
+    p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine")
+    p.add_argument("--refine", choices=motion.REFINEMENTS, default="none",
+                   help="ecc: hierarchical coarse-to-fine direct refinement of each estimate (slower)")
+    p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=default_rrd, metavar="PATH",
+                   help="write a Rerun recording (default place: recordings/<input name>.rrd)")
+    p.add_argument("--record", choices=("summary", "full"), default="full",
+                   help="recording detail: summary (series, output frames) or full (every intermediate)")
+    p.add_argument("--lossless", action="store_true", help="record images losslessly instead of JPEG")
+    p.add_argument("--crf", type=int, default=18, help="x264 quality of the output (lower is better; default: %(default)s)")
+
+
+def _stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
+    try:
+        return stab.StabilizeConfig(
+            mode=args.mode,
+            motion=motion.MotionConfig(model=args.motion_model, refine=args.refine),
+            smoothing=smoothing.SmoothingConfig(radius=args.smoothing_radius, sigma=args.smoothing_sigma),
+        )
+    except ValueError as error:  # the configs validate their own values
+        raise ConfigError(str(error)) from None
+
+
+def _recording_path(args: argparse.Namespace, input_path: Path) -> Path | None:
+    if args.rrd is None:
+        return None
+    if args.rrd == Path("AUTO"):
+        return DEFAULT_RECORDINGS / f"{input_path.stem}.rrd"
+    return args.rrd
+
+
+def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace, *, overwrite: bool,
+                  observers: Sequence[Observer] = ()) -> stab.StabilizeReport:
+    from ffviz.progress import tqdm_progress
+
+    config = _stabilize_config(args)
+    rrd_path = _recording_path(args, input_path)
+    recorder = None
+    if rrd_path is not None:
+        from ffviz.recorder import RerunRecorder
+
+        recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80)
+    try:
+        report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
+                                progress=tqdm_progress, overwrite=overwrite, crf=args.crf)
+    except BaseException:
+        if recorder is not None:
+            recorder.abort()
+        raise
+    _print_report(report, rrd_path)
+    return report
+
+
+def _print_report(report: stab.StabilizeReport, rrd_path: Path | None) -> None:
+    lines = [f"stabilized {report.n_frames} frames in {report.seconds:.1f} s "
+             f"({report.n_frames / max(report.seconds, 1e-9):.1f} frames/s) -> {report.output_path}"]
+    if report.crop is not None:
+        lines.append(f"crop: kept {report.crop.cropping_ratio:.1%} of the frame area (scale {report.crop.scale:.3f})")
+    if report.cuts:
+        lines.append(f"scene cuts at frames {', '.join(map(str, report.cuts))}")
+    if report.warnings:
+        lines.append(f"{len(report.warnings)} warning(s); first: {report.warnings[0][1]}"
+                     + (f" (frame {report.warnings[0][0]})" if report.warnings[0][0] is not None else ""))
+    if rrd_path is not None:
+        lines.append(f"recording: {rrd_path}  (open with: ffviz view {rrd_path})")
+    print("\n".join(lines))
+
+
+def cmd_stabilize(args: argparse.Namespace) -> int:
+    run_stabilize(args.input, args.output, args, overwrite=args.overwrite)
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from ffviz.demo import run_demo
+
+    return run_demo(args)
+
+
+def cmd_metrics(args: argparse.Namespace) -> int:
+    from pipeline import metrics
+
+    result = metrics.compare(args.input, args.output)
+    data = result.to_dict()
+    if args.json:
+        print(json.dumps(data, indent=2))
+        return 0
+    rows = [("", "input", "output")]
+    for key, label, fmt in (("residual_jitter_px", "residual jitter (px)", "{:.3f}"),
+                            ("residual_jitter_deg", "residual jitter (deg)", "{:.4f}"),
+                            ("stability_translation", "stability, translation", "{:.3f}"),
+                            ("stability_rotation", "stability, rotation", "{:.3f}")):
+        rows.append((label, fmt.format(data["input"][key]), fmt.format(data[key])))
+    for key, label in (("cropping_ratio", "cropping ratio"), ("distortion", "distortion (worst frame)"),
+                       ("black_fraction", "black pixels (fraction)")):
+        rows.append((label, "", f"{data[key]:.3f}"))
+    width = max(len(r[0]) for r in rows)
+    print("\n".join(f"{a:<{width}}  {b:>8}  {c:>8}" for a, b, c in rows))
+    return 0
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from ffviz.viewer import serve
+
+    return serve(args.recording, web_port=args.web_port, grpc_port=args.grpc_port, native=args.native)
+
+
+COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics, "view": cmd_view}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        return COMMANDS[args.command](args)
+    except FFVizError as error:
+        print(f"ffviz: error: {error}", file=sys.stderr)
+        return error.exit_code
+    except KeyboardInterrupt:
+        print("ffviz: interrupted; no output written", file=sys.stderr)
+        return 130
+    except Terminated:
+        print("ffviz: terminated; no output written", file=sys.stderr)
+        return 143
+    except Exception as error:  # noqa: BLE001 - the last line of defence: one line, not a traceback
+        if args.debug:
+            traceback.print_exc()
+        print(f"ffviz: internal error: {type(error).__name__}: {error} (rerun with --debug for details)",
+              file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

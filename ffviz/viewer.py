@@ -1,0 +1,87 @@
+"""Serving a recording to the Rerun viewer: the web viewer on 127.0.0.1 (offline), or the native one."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import rerun as rr
+
+from pipeline.errors import InputError
+
+RRD_MAGIC = b"RRF2"
+
+
+def rerun_executable() -> str:
+    """The `rerun` CLI that ships inside the rerun-sdk wheel (beside this Python), else the one on PATH."""
+    beside = Path(sys.executable).parent / "rerun"
+    if beside.is_file():
+        return str(beside)
+    found = shutil.which("rerun")
+    if found is None:
+        raise InputError("the rerun viewer executable was not found (is rerun-sdk installed in this environment?)")
+    return found
+
+
+def check_recording(path: Path) -> None:
+    """A clear one-line error for a missing file or one that is not a Rerun recording."""
+    if not path.is_file():
+        raise InputError(f"{path}: no such recording")
+    with path.open("rb") as f:
+        magic = f.read(4)
+    if magic != RRD_MAGIC:
+        raise InputError(f"{path}: not a Rerun recording (.rrd)")
+
+
+def recording_sdk_version(path: Path) -> str | None:
+    """The rerun-sdk version ffviz wrote into the recording's meta document, if readable by this SDK."""
+    from rerun.chunk import RrdReader
+
+    try:
+        for chunk in RrdReader(str(path)).stream().to_chunks():
+            if str(chunk.entity_path).strip("/") == "meta":
+                text = str(chunk.to_record_batch().to_pydict())
+                marker = "rerun-sdk "
+                if marker in text:
+                    return text.split(marker, 1)[1].split("\\n", 1)[0].split()[0]
+    except Exception:  # an unreadable file is reported by the caller
+        return None
+    return None
+
+
+def version_note(path: Path) -> str | None:
+    written_by = recording_sdk_version(path)
+    if written_by is None:
+        return (f"could not read {path} with rerun-sdk {rr.__version__}: it may have been written by another "
+                f"rerun version (a .rrd is only readable by the version that wrote it)")
+    if written_by != rr.__version__:
+        return f"{path} was written by rerun-sdk {written_by}; this viewer is {rr.__version__}: it may not load"
+    return None
+
+
+def web_viewer_command(path: Path, *, web_port: int, grpc_port: int) -> list[str]:
+    return [rerun_executable(), "--web-viewer", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
+            "--port", str(grpc_port), str(path)]
+
+
+def serve(path: Path, *, web_port: int = 9090, grpc_port: int = 9876, native: bool = False) -> int:
+    """Run the viewer until it exits or the user presses Ctrl-C; returns the viewer's exit status."""
+    check_recording(path)
+    note = version_note(path)
+    if note:
+        print(f"ffviz: warning: {note}", file=sys.stderr)
+    if native:
+        command = [rerun_executable(), str(path)]
+    else:
+        command = web_viewer_command(path, web_port=web_port, grpc_port=grpc_port)
+        url = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
+        print(f"serving {path} at {url}  (Ctrl-C to stop)", flush=True)
+    process = subprocess.Popen(command)
+    try:
+        return process.wait()
+    except KeyboardInterrupt:
+        process.terminate()
+        process.wait(timeout=10)
+        return 0

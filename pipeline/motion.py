@@ -1,0 +1,281 @@
+"""Global motion between consecutive frames (thesis 3.2).
+
+Robust feature-based estimation: Shi-Tomasi corners tracked by pyramidal Lucas-Kanade with a
+forward-backward check, then a RANSAC fit of the chosen model (affine by default, similarity or
+homography). Optionally a hierarchical direct refinement in the spirit of Bergen et al.: ECC
+(enhanced correlation coefficient) maximisation coarse-to-fine on an image pyramid.
+
+Frames that cannot be aligned (featureless, black, a scene cut) fall back to the identity and say why,
+so the camera path is never flung by one bad pair.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import cv2
+import numpy as np
+
+from pipeline import geometry
+
+MotionModel = Literal["affine", "similarity", "homography"]
+Refinement = Literal["none", "ecc"]
+MOTION_MODELS: tuple[str, ...] = ("affine", "similarity", "homography")
+REFINEMENTS: tuple[str, ...] = ("none", "ecc")
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    model: MotionModel = "affine"
+    refine: Refinement = "none"
+    max_side: int = 960  # estimation runs on frames downscaled to this longest side
+    max_corners: int = 1000
+    corner_quality: float = 0.003
+    corner_min_distance: int = 8
+    lk_window: int = 21
+    lk_levels: int = 4
+    lk_passes: int = 2  # later passes track against curr warped back by the estimate so far (removes LK's bias)
+    fb_max_error_px: float = 1.0  # forward-backward tracking error beyond which a track is dropped
+    ransac_threshold_px: float = 1.5
+    min_inliers: int = 12
+    min_inlier_ratio: float = 0.25
+    max_rotation_deg: float = 25.0  # larger inter-frame changes are not hand shake: treated as failures
+    max_scale_change: float = 0.25
+    max_shift_fraction: float = 0.35  # of the frame diagonal
+    cut_hist_distance: float = 0.45  # Bhattacharyya distance of HSV histograms that marks a scene cut
+    ecc_levels: int = 3
+    ecc_iterations: int = 50
+    ecc_epsilon: float = 1e-5
+
+    def __post_init__(self) -> None:
+        if self.model not in MOTION_MODELS:
+            raise ValueError(f"motion model must be one of {', '.join(MOTION_MODELS)}, not {self.model!r}")
+        if self.refine not in REFINEMENTS:
+            raise ValueError(f"refinement must be one of {', '.join(REFINEMENTS)}, not {self.refine!r}")
+
+
+@dataclass(frozen=True)
+class MotionEstimate:
+    """Motion of one frame relative to the previous one, with what the estimate rests on."""
+
+    curr_from_prev: np.ndarray  # 3x3, full-resolution pixels
+    status: Literal["ok", "fallback", "cut", "first"]
+    n_tracked: int = 0
+    n_inliers: int = 0
+    residual_px: float = 0.0  # RMS reprojection error of the inliers, full-resolution px
+    hist_distance: float = 0.0
+    warning: str | None = None
+    # Tracks for the debugger, full-resolution px: (K, 2) each, inlier flags (K,).
+    prev_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    curr_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros((0,), bool))
+
+    @property
+    def inlier_ratio(self) -> float:
+        return self.n_inliers / self.n_tracked if self.n_tracked else 0.0
+
+
+@dataclass(frozen=True)
+class PreparedFrame:
+    """What motion estimation keeps of a frame: downscaled grey image and colour histogram."""
+
+    gray: np.ndarray
+    hist: np.ndarray
+    scale: float  # working size / full size
+    width: int
+    height: int
+
+
+def prepare(rgb: np.ndarray, config: MotionConfig) -> PreparedFrame:
+    height, width = rgb.shape[:2]
+    scale = min(1.0, config.max_side / max(width, height))
+    small = rgb if scale == 1.0 else cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    gray = cv2.cvtColor(small, cv2.COLOR_RGB2GRAY)
+    hsv = cv2.cvtColor(small, cv2.COLOR_RGB2HSV)
+    hist = cv2.calcHist([hsv], [0, 1], None, [30, 32], [0, 180, 0, 256])
+    cv2.normalize(hist, hist, alpha=1.0, norm_type=cv2.NORM_L1)
+    return PreparedFrame(gray=gray, hist=hist, scale=scale, width=width, height=height)
+
+
+def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> MotionEstimate:
+    """curr_from_prev between two prepared frames, or the identity with a reason."""
+    hist_distance = float(cv2.compareHist(prev.hist, curr.hist, cv2.HISTCMP_BHATTACHARYYA))
+    work = _track_and_fit(prev.gray, curr.gray, config)
+    if config.refine == "ecc":
+        work = _refine_ecc(prev.gray, curr.gray, work, config)
+
+    failure = work.failure or _implausible(work.curr_from_prev, curr.gray.shape, config)
+    full_transform = geometry.rescale_transform(work.curr_from_prev, curr.scale)
+    to_full = 1.0 / curr.scale
+    tracks = dict(
+        n_tracked=work.n_tracked,
+        n_inliers=work.n_inliers,
+        residual_px=work.residual_px * to_full,
+        hist_distance=hist_distance,
+        prev_points=work.prev_points * to_full,
+        curr_points=work.curr_points * to_full,
+        inliers=work.inliers,
+    )
+    if failure is None:
+        return MotionEstimate(curr_from_prev=full_transform, status="ok", **tracks)
+    # A failed alignment with a different colour distribution is a cut; otherwise a bad pair.
+    if hist_distance > config.cut_hist_distance:
+        return MotionEstimate(
+            curr_from_prev=geometry.IDENTITY.copy(), status="cut",
+            warning=f"scene cut ({failure}; histogram distance {hist_distance:.2f}): smoothing restarts here",
+            **tracks,
+        )
+    return MotionEstimate(
+        curr_from_prev=geometry.IDENTITY.copy(), status="fallback",
+        warning=f"motion fallback to identity: {failure}", **tracks,
+    )
+
+
+@dataclass
+class _WorkEstimate:
+    curr_from_prev: np.ndarray
+    failure: str | None
+    n_tracked: int = 0
+    n_inliers: int = 0
+    residual_px: float = 0.0
+    prev_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    curr_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros((0,), bool))
+
+
+def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig) -> _WorkEstimate:
+    corners = cv2.goodFeaturesToTrack(
+        prev_gray, maxCorners=config.max_corners, qualityLevel=config.corner_quality,
+        minDistance=config.corner_min_distance, blockSize=7,
+    )
+    if corners is None or len(corners) < config.min_inliers:
+        found = 0 if corners is None else len(corners)
+        return _WorkEstimate(geometry.IDENTITY.copy(), f"featureless frame ({found} corners)")
+
+    lk = dict(winSize=(config.lk_window, config.lk_window), maxLevel=config.lk_levels,
+              criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 40, 0.001))
+    corners = corners.reshape(-1, 2)
+    curr_from_prev = geometry.IDENTITY.copy()
+    result = _WorkEstimate(curr_from_prev, "no tracking pass ran")
+    for lk_pass in range(max(1, config.lk_passes)):
+        # Track against curr brought back into prev's frame, so what LK sees is only the residual motion.
+        target = curr_gray if lk_pass == 0 else _warp_gray(curr_gray, curr_from_prev)
+        prev_pts, target_pts = _track(prev_gray, target, corners, lk, config.fb_max_error_px)
+        curr_pts = geometry.apply(curr_from_prev, target_pts).astype(np.float32)
+        if len(prev_pts) < config.min_inliers:
+            if lk_pass > 0:
+                break  # keep the previous pass's estimate
+            return _WorkEstimate(geometry.IDENTITY.copy(), f"too few tracked features ({len(prev_pts)})",
+                                 n_tracked=len(prev_pts), prev_points=prev_pts, curr_points=curr_pts,
+                                 inliers=np.zeros(len(prev_pts), bool))
+        matrix, inlier_mask = _fit_model(prev_pts, curr_pts, config)
+        inliers = np.zeros(len(prev_pts), bool) if inlier_mask is None else inlier_mask.ravel().astype(bool)
+        result = _WorkEstimate(curr_from_prev, None, n_tracked=len(prev_pts), n_inliers=int(inliers.sum()),
+                               prev_points=prev_pts, curr_points=curr_pts, inliers=inliers)
+        if matrix is None or not np.all(np.isfinite(matrix)):
+            result.failure = "model fit failed"
+            return result
+        curr_from_prev = geometry.to_3x3(matrix)
+        result.curr_from_prev = curr_from_prev
+        if result.n_inliers < config.min_inliers or result.n_inliers < config.min_inlier_ratio * len(prev_pts):
+            result.failure = f"too few inliers ({result.n_inliers} of {len(prev_pts)})"
+            return result
+    inl = result.inliers
+    projected = geometry.apply(result.curr_from_prev, result.prev_points[inl])
+    result.residual_px = float(np.sqrt(np.mean(np.sum((projected - result.curr_points[inl]) ** 2, axis=1))))
+    return result
+
+
+def _track(prev_gray: np.ndarray, curr_gray: np.ndarray, corners: np.ndarray, lk: dict,
+           fb_max_error_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pyramidal LK from prev to curr, keeping tracks that come back to their start (forward-backward check)."""
+    start = corners.reshape(-1, 1, 2).astype(np.float32)
+    tracked, status, _ = cv2.calcOpticalFlowPyrLK(prev_gray, curr_gray, start, None, **lk)
+    back, status_back, _ = cv2.calcOpticalFlowPyrLK(curr_gray, prev_gray, tracked, None, **lk)
+    fb_error = np.linalg.norm((back - start).reshape(-1, 2), axis=1)
+    good = (status.ravel() == 1) & (status_back.ravel() == 1) & (fb_error < fb_max_error_px)
+    return start.reshape(-1, 2)[good], tracked.reshape(-1, 2)[good]
+
+
+def _warp_gray(curr_gray: np.ndarray, curr_from_prev: np.ndarray) -> np.ndarray:
+    """curr resampled into prev's pixel grid: out(p) = curr(curr_from_prev p)."""
+    height, width = curr_gray.shape
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    if np.allclose(curr_from_prev[2], [0, 0, 1]):
+        return cv2.warpAffine(curr_gray, curr_from_prev[:2], (width, height), flags=flags, borderMode=cv2.BORDER_REPLICATE)
+    return cv2.warpPerspective(curr_gray, curr_from_prev, (width, height), flags=flags, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _fit_model(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig):
+    threshold = config.ransac_threshold_px
+    if config.model == "homography":
+        return cv2.findHomography(prev_pts, curr_pts, cv2.RANSAC, threshold, maxIters=2000, confidence=0.995)
+    fit = cv2.estimateAffine2D if config.model == "affine" else cv2.estimateAffinePartial2D
+    return fit(prev_pts, curr_pts, method=cv2.RANSAC, ransacReprojThreshold=threshold,
+               maxIters=2000, confidence=0.995, refineIters=20)
+
+
+def _refine_ecc(prev_gray: np.ndarray, curr_gray: np.ndarray, start: _WorkEstimate,
+                config: MotionConfig) -> _WorkEstimate:
+    """Coarse-to-fine direct alignment (Bergen et al.'s hierarchical framework, ECC criterion).
+
+    Starts from the feature estimate when there is one, else from the identity, so it can also rescue
+    pairs with too few corners. Keeps the start when ECC does not converge.
+    """
+    homography = config.model == "homography"
+    ecc_mode = cv2.MOTION_HOMOGRAPHY if homography else cv2.MOTION_AFFINE
+    # ECC's warp maps template (curr) coordinates to input (prev) coordinates.
+    prev_from_curr = np.linalg.inv(start.curr_from_prev)
+    pyramid = [(prev_gray.astype(np.float32), curr_gray.astype(np.float32))]
+    for _ in range(config.ecc_levels - 1):
+        p, c = pyramid[-1]
+        if min(p.shape) < 64:
+            break
+        pyramid.append((cv2.pyrDown(p), cv2.pyrDown(c)))
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, config.ecc_iterations, config.ecc_epsilon)
+    try:
+        for level in range(len(pyramid) - 1, -1, -1):
+            scale = 0.5 ** level
+            to_level = np.diag([scale, scale, 1.0])  # pyrDown halves coordinates (pixel-centre offset is negligible here)
+            warp = to_level @ prev_from_curr @ np.linalg.inv(to_level)
+            warp = (warp / warp[2, 2]).astype(np.float32)
+            p, c = pyramid[level]
+            _, warp = cv2.findTransformECC(c, p, warp if homography else warp[:2].copy(), ecc_mode, criteria, None, 5)
+            prev_from_curr = np.linalg.inv(to_level) @ geometry.to_3x3(warp) @ to_level
+    except cv2.error:
+        return start
+    curr_from_prev = geometry.to_3x3(np.linalg.inv(prev_from_curr))
+    if config.model == "similarity":
+        curr_from_prev = _nearest_similarity(curr_from_prev)
+    return _WorkEstimate(curr_from_prev, None, start.n_tracked, start.n_inliers, start.residual_px,
+                         start.prev_points, start.curr_points, start.inliers)
+
+
+def _nearest_similarity(affine: np.ndarray) -> np.ndarray:
+    """Closest rotation+uniform scale to the 2x2 part (polar decomposition), translation kept."""
+    u, s, vt = np.linalg.svd(affine[:2, :2])
+    rotation = u @ vt
+    result = affine.copy()
+    result[:2, :2] = rotation * s.mean()
+    return result
+
+
+def _implausible(curr_from_prev: np.ndarray, shape: tuple[int, int], config: MotionConfig) -> str | None:
+    height, width = shape
+    dx, dy, angle, scale = geometry.decompose(curr_from_prev, width, height)
+    if abs(angle) > config.max_rotation_deg:
+        return f"implausible rotation {angle:.1f} deg"
+    if abs(scale - 1.0) > config.max_scale_change:
+        return f"implausible scale change {scale:.2f}"
+    if math.hypot(dx, dy) > config.max_shift_fraction * math.hypot(width, height):
+        return f"implausible shift {math.hypot(dx, dy):.0f} px"
+    if config.model == "homography" and np.abs(curr_from_prev[2, :2]).max() * max(width, height) > 0.5:
+        return "implausible perspective"
+    return None
+
+
+def first_frame_estimate() -> MotionEstimate:
+    """Frame 0 has no predecessor: identity by definition."""
+    return MotionEstimate(curr_from_prev=geometry.IDENTITY.copy(), status="first")

@@ -1,0 +1,193 @@
+"""The orchestrator: two streaming passes over the video.
+
+Pass 1 decodes every frame once and estimates the motion to its predecessor, keeping only the previous
+(downscaled) frame and one 3x3 matrix per frame. The path is smoothed as a whole (it is tiny). Pass 2
+decodes again, warps, and encodes. Memory is bounded by the frame window, not by the video's length.
+Every stage's result goes to the observer.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from pipeline import motion, smoothing, video_io, warping
+from pipeline.errors import InputError
+from pipeline.observer import NullObserver, Observer, ProgressFactory, Stamp, null_progress
+
+OutputMode = Literal["none", "crop"]
+OUTPUT_MODES: tuple[str, ...] = ("none", "crop")
+
+
+@dataclass(frozen=True)
+class StabilizeConfig:
+    mode: OutputMode = "crop"
+    motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
+    smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
+
+    def __post_init__(self) -> None:
+        if self.mode not in OUTPUT_MODES:
+            raise ValueError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
+
+
+@dataclass
+class MotionPass:
+    """What pass 1 leaves for pass 2: one transform and one status per frame."""
+
+    curr_from_prev: np.ndarray  # (N, 3, 3)
+    statuses: list[str]
+    times_s: list[float]
+    warnings: list[tuple[int | None, str]]
+
+    @property
+    def cuts(self) -> list[int]:
+        return [t for t, status in enumerate(self.statuses) if status == "cut"]
+
+
+@dataclass
+class StabilizeReport:
+    input_path: Path
+    output_path: Path | None
+    n_frames: int
+    mode: str
+    crop: warping.CropWindow | None
+    cuts: list[int]
+    fallbacks: list[int]
+    warnings: list[tuple[int | None, str]]
+    seconds_motion: float
+    seconds_render: float
+
+    @property
+    def seconds(self) -> float:
+        return self.seconds_motion + self.seconds_render
+
+
+def estimate_motion(path: Path, config: motion.MotionConfig, *, observer: Observer,
+                    progress: ProgressFactory, total: int | None) -> MotionPass:
+    transforms: list[np.ndarray] = []
+    statuses: list[str] = []
+    times: list[float] = []
+    warnings: list[tuple[int | None, str]] = []
+    bar = progress("pass 1/2: motion", total)
+    previous: motion.PreparedFrame | None = None
+    try:
+        with video_io.VideoReader(path) as reader:
+            for frame in reader:
+                stamp = Stamp(frame.index, frame.time_s)
+                _forward_reader_warnings(reader, stamp, observer, warnings)
+                prepared = motion.prepare(frame.rgb, config)
+                if previous is None:
+                    estimate = motion.first_frame_estimate()
+                elif prepared.gray.shape != previous.gray.shape:
+                    estimate = motion.MotionEstimate(np.eye(3), "cut", warning="frame size changed: treated as a cut")
+                else:
+                    estimate = motion.estimate(previous, prepared, config)
+                if estimate.warning:
+                    warnings.append((frame.index, estimate.warning))
+                    observer.on_warning(stamp, estimate.warning)
+                observer.on_stage("motion", stamp, estimate)
+                transforms.append(estimate.curr_from_prev)
+                statuses.append(estimate.status)
+                times.append(frame.time_s)
+                previous = prepared
+                bar.update()
+            _forward_reader_warnings(reader, None, observer, warnings)
+    finally:
+        bar.close()
+    if not transforms:
+        raise InputError(f"{path}: no decodable video frames")
+    return MotionPass(np.array(transforms), statuses, times, warnings)
+
+
+def _forward_reader_warnings(reader: video_io.VideoReader, stamp: Stamp | None, observer: Observer,
+                             sink: list[tuple[int | None, str]]) -> None:
+    """Decoder complaints (corrupt packets skipped) become warnings like any other."""
+    pending = getattr(reader, "warnings", None)
+    while pending:
+        message = pending.pop(0)
+        sink.append((stamp.index if stamp else None, message))
+        observer.on_warning(stamp, message)
+
+
+def output_transforms(orig_from_stab: np.ndarray, mode: str, width: int, height: int,
+                      ) -> tuple[np.ndarray, warping.CropWindow | None, str | None]:
+    """orig_from_out per frame for the output mode, the crop window, and a warning if cropping gave up."""
+    if mode != "crop":
+        return orig_from_stab, None, None
+    window = warping.largest_crop(orig_from_stab, width, height)
+    if window is None:
+        return orig_from_stab, None, "no area is common to all stabilized frames: crop disabled, borders left black"
+    return orig_from_stab @ window.stab_from_out, window, None
+
+
+def stabilize(input_path: Path | str, output_path: Path | str | None, config: StabilizeConfig = StabilizeConfig(), *,
+              observer: Observer | None = None, progress: ProgressFactory = null_progress,
+              overwrite: bool = False, crf: int = 18) -> StabilizeReport:
+    """Stabilize ``input_path`` into ``output_path`` (None: run and observe, write nothing)."""
+    observer = observer or NullObserver()
+    input_path = Path(input_path)
+    output_path = Path(output_path) if output_path is not None else None
+    info = video_io.probe_video(input_path)
+    if output_path is not None:
+        video_io.check_output_path(output_path, input_path, overwrite=overwrite)
+    observer.on_start(info, config)
+
+    started = time.perf_counter()
+    motion_pass = estimate_motion(input_path, config.motion, observer=observer, progress=progress,
+                                  total=info.frame_count or None)
+    n_frames = len(motion_pass.statuses)
+    smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
+                                width=info.width, height=info.height)
+    observer.on_stage("smoothing", None, smoothed)
+    orig_from_out, crop, crop_warning = output_transforms(smoothed.orig_from_stab, config.mode, info.width, info.height)
+    warnings = list(motion_pass.warnings)
+    if crop_warning:
+        warnings.append((None, crop_warning))
+        observer.on_warning(None, crop_warning)
+    if crop is not None:
+        observer.on_stage("crop", None, crop)
+    seconds_motion = time.perf_counter() - started
+
+    started = time.perf_counter()
+    _render(input_path, output_path, info, smoothed.orig_from_stab, orig_from_out, config,
+            observer=observer, progress=progress, total=n_frames, crf=crf, warnings=warnings)
+    report = StabilizeReport(
+        input_path=input_path, output_path=output_path, n_frames=n_frames, mode=config.mode, crop=crop,
+        cuts=motion_pass.cuts, fallbacks=[t for t, s in enumerate(motion_pass.statuses) if s == "fallback"],
+        warnings=warnings, seconds_motion=seconds_motion, seconds_render=time.perf_counter() - started,
+    )
+    observer.on_finish(report)
+    return report
+
+
+def _render(input_path: Path, output_path: Path | None, info: video_io.VideoInfo, orig_from_stab: np.ndarray,
+            orig_from_out: np.ndarray, config: StabilizeConfig, *, observer: Observer, progress: ProgressFactory,
+            total: int, crf: int, warnings: list[tuple[int | None, str]]) -> None:
+    bar = progress("pass 2/2: warp + encode", total)
+    writer = video_io.VideoWriter(output_path, like=info, audio_from=input_path, crf=crf) if output_path else None
+    try:
+        with video_io.VideoReader(input_path) as reader:
+            for frame in reader:
+                stamp = Stamp(frame.index, frame.time_s)
+                # Decoding is deterministic, so pass 2 sees pass 1's frames; guard anyway.
+                t = min(frame.index, len(orig_from_stab) - 1)
+                observer.on_stage("input", stamp, frame)
+                stabilized = warping.warp_frame(frame.rgb, orig_from_stab[t])
+                observer.on_stage("warp", stamp, stabilized)
+                output = stabilized.frame if config.mode != "crop" else warping.warp(frame.rgb, orig_from_out[t])
+                observer.on_stage("output", stamp, output)
+                if writer is not None:
+                    writer.write(output, pts=frame.pts, time_s=frame.time_s)
+                bar.update()
+        if writer is not None:
+            writer.close()
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+    finally:
+        bar.close()

@@ -1,0 +1,99 @@
+"""Warping by the smoothing transform (eq. 19), the mask of missing pixels, and the crop window.
+
+A stabilized pixel p' takes the original's value at S_t p' (``orig_from_stab``); where S_t p' falls outside
+the original frame the pixel is missing: black in ``--mode none``, cropped away in ``--mode crop``,
+completed from neighbours in full-frame mode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.optimize import linprog
+
+from pipeline import geometry
+
+
+@dataclass(frozen=True)
+class WarpResult:
+    frame: np.ndarray  # (H, W, 3) uint8, missing pixels black
+    missing: np.ndarray  # (H, W) bool: no original pixel maps here
+    orig_from_out: np.ndarray  # 3x3 transform the frame was sampled with
+
+
+def warp(image: np.ndarray, orig_from_out: np.ndarray, size: tuple[int, int] | None = None, *,
+         interpolation: int = cv2.INTER_LINEAR, border_value: float = 0) -> np.ndarray:
+    """out(p) = image(orig_from_out p), for an affine or projective 3x3 transform."""
+    height, width = image.shape[:2]
+    out_size = size or (width, height)
+    flags = interpolation | cv2.WARP_INVERSE_MAP
+    m = np.asarray(orig_from_out, dtype=np.float64)
+    if np.allclose(m[2], [0.0, 0.0, 1.0]):
+        return cv2.warpAffine(image, m[:2], out_size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=border_value)
+    return cv2.warpPerspective(image, m, out_size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=border_value)
+
+
+def warp_frame(rgb: np.ndarray, orig_from_out: np.ndarray) -> WarpResult:
+    """The stabilized frame and its missing mask (pixels not fully covered by the original)."""
+    height, width = rgb.shape[:2]
+    frame = warp(rgb, orig_from_out)
+    coverage = warp(np.full((height, width), 255, np.uint8), orig_from_out)
+    # Anything short of full coverage blended in black from outside the frame: count it as missing.
+    missing = coverage < 255
+    frame[missing] = 0
+    return WarpResult(frame=frame, missing=missing, orig_from_out=np.asarray(orig_from_out, dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class CropWindow:
+    """The output frame as a window of the stabilized frame: stab = (x0, y0) + scale * out."""
+
+    x0: float
+    y0: float
+    scale: float  # < 1: the window is smaller than the frame and is enlarged back to full size
+
+    @property
+    def stab_from_out(self) -> np.ndarray:
+        return np.array([[self.scale, 0.0, self.x0], [0.0, self.scale, self.y0], [0.0, 0.0, 1.0]])
+
+    @property
+    def cropping_ratio(self) -> float:
+        """Area kept, as a fraction of the frame."""
+        return self.scale**2
+
+
+def largest_crop(orig_from_stab: np.ndarray, width: int, height: int) -> CropWindow | None:
+    """The largest window of the input's aspect ratio valid in every stabilized frame.
+
+    Each frame's valid region is the original frame mapped into stabilized coordinates (a convex quad);
+    the window's four corners must lie inside all of them and inside the frame. That is a linear
+    programme in (x0, y0, scale), maximising scale. None when no area is common to all frames.
+    """
+    corners = geometry.frame_corners(width, height)
+    offsets = corners  # window corner j sits at (x0, y0) + scale * corners[j]
+    rows: list[np.ndarray] = []
+    bounds: list[float] = []
+
+    def inside_convex(polygon: np.ndarray) -> None:
+        centre = polygon.mean(axis=0)
+        for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
+            normal = np.array([b[1] - a[1], a[0] - b[0]])
+            if normal @ (centre - a) > 0:  # make the normal point outward
+                normal = -normal
+            for offset in offsets:  # normal . ((x0, y0) + scale * offset) <= normal . a
+                rows.append(np.array([normal[0], normal[1], normal @ offset]))
+                bounds.append(float(normal @ a))
+
+    inside_convex(corners)
+    for s_t in np.asarray(orig_from_stab):
+        inside_convex(geometry.apply(np.linalg.inv(s_t), corners))
+
+    result = linprog(c=[0.0, 0.0, -1.0], A_ub=np.array(rows), b_ub=np.array(bounds),
+                     bounds=[(None, None), (None, None), (0.0, 1.0)], method="highs")
+    if not result.success or result.x[2] <= 1e-3:
+        return None  # no area is valid in every frame
+
+    x0, y0, scale = result.x
+    return CropWindow(float(x0), float(y0), float(scale))

@@ -1,0 +1,69 @@
+"""Warping by S_t and the crop window, against transforms whose missing areas are known exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.warping import largest_crop, warp_frame
+
+W, H = 160, 90
+
+
+def translation(dx: float, dy: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
+
+
+def test_warp_shifts_content_and_marks_exactly_the_uncovered_stripe():
+    rng = np.random.default_rng(0)
+    frame = rng.integers(1, 255, size=(H, W, 3), dtype=np.uint8)
+    # orig_from_stab = translate(+7, 0): stabilized pixel x samples the original at x + 7.
+    result = warp_frame(frame, translation(7, 0))
+    assert result.missing[:, W - 7:].all() and not result.missing[:, : W - 7].any()
+    np.testing.assert_array_equal(result.frame[:, : W - 7], frame[:, 7:])
+    assert (result.frame[result.missing] == 0).all()
+
+
+def test_subpixel_shift_counts_partially_covered_column_as_missing():
+    frame = np.full((H, W, 3), 200, np.uint8)
+    result = warp_frame(frame, translation(-2.5, 0))
+    assert result.missing[:, :3].all() and not result.missing[:, 3:].any()
+
+
+def test_identity_warp_misses_nothing():
+    frame = np.full((H, W, 3), 90, np.uint8)
+    result = warp_frame(frame, np.eye(3))
+    assert not result.missing.any()
+
+
+@pytest.mark.parametrize("shift", [3.0, 10.0])
+def test_largest_crop_of_horizontal_jitter(shift):
+    # Frames sample the original at x +/- shift: valid x is [shift, W-1-shift] in every frame.
+    transforms = np.array([translation(shift, 0), translation(-shift, 0), np.eye(3)])
+    window = largest_crop(transforms, W, H)
+    expected_scale = (W - 1 - 2 * shift) / (W - 1)
+    assert window.scale == pytest.approx(expected_scale, abs=1e-6)
+    assert window.x0 == pytest.approx(shift, abs=1e-6)
+    # The window keeps the aspect ratio and lies inside every frame's valid area.
+    corners = np.array([[0, 0, 1], [W - 1, 0, 1], [W - 1, H - 1, 1], [0, H - 1, 1]], float).T
+    for s_t in transforms:
+        mapped = (s_t @ window.stab_from_out @ corners)[:2]
+        assert (mapped[0] >= -1e-6).all() and (mapped[0] <= W - 1 + 1e-6).all()
+        assert (mapped[1] >= -1e-6).all() and (mapped[1] <= H - 1 + 1e-6).all()
+
+
+def test_crop_of_rotated_frames_is_valid_everywhere():
+    a = np.radians(3.0)
+    c, s = np.cos(a), np.sin(a)
+    cx, cy = (W - 1) / 2, (H - 1) / 2
+    rot = np.array([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy], [0, 0, 1]])
+    window = largest_crop(np.array([rot, np.linalg.inv(rot)]), W, H)
+    assert 0.5 < window.scale < 0.95
+    frame = np.full((H, W, 3), 255, np.uint8)
+    for s_t in (rot, np.linalg.inv(rot)):
+        assert not warp_frame(frame, s_t @ window.stab_from_out).missing.any()
+
+
+def test_no_common_area_gives_none():
+    transforms = np.array([translation(W, 0), translation(-W, 0)])
+    assert largest_crop(transforms, W, H) is None
