@@ -34,6 +34,7 @@ class MotionConfig:
     max_corners: int = 1000
     corner_quality: float = 0.003
     corner_min_distance: int = 8
+    corner_grid: tuple[int, int] = (8, 5)  # corners are detected per cell (columns, rows), see _detect_corners
     lk_window: int = 21
     lk_levels: int = 4
     lk_passes: int = 2  # later passes track against curr warped back by the estimate so far (removes LK's bias)
@@ -146,13 +147,9 @@ class _WorkEstimate:
 
 
 def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig) -> _WorkEstimate:
-    corners = cv2.goodFeaturesToTrack(
-        prev_gray, maxCorners=config.max_corners, qualityLevel=config.corner_quality,
-        minDistance=config.corner_min_distance, blockSize=7,
-    )
-    if corners is None or len(corners) < config.min_inliers:
-        found = 0 if corners is None else len(corners)
-        return _WorkEstimate(geometry.IDENTITY.copy(), f"featureless frame ({found} corners)")
+    corners = _detect_corners(prev_gray, config)
+    if len(corners) < config.min_inliers:
+        return _WorkEstimate(geometry.IDENTITY.copy(), f"featureless frame ({len(corners)} corners)")
 
     lk = dict(winSize=(config.lk_window, config.lk_window), maxLevel=config.lk_levels,
               criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 40, 0.001))
@@ -160,10 +157,15 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
     curr_from_prev = geometry.IDENTITY.copy()
     result = _WorkEstimate(curr_from_prev, "no tracking pass ran")
     for lk_pass in range(max(1, config.lk_passes)):
-        # Track against curr brought back into prev's frame, so what LK sees is only the residual motion.
-        target = curr_gray if lk_pass == 0 else _warp_gray(curr_gray, curr_from_prev)
-        prev_pts, target_pts = _track(prev_gray, target, corners, lk, config.fb_max_error_px)
-        curr_pts = geometry.apply(curr_from_prev, target_pts).astype(np.float32)
+        if lk_pass == 0:
+            prev_pts, curr_pts = _track(prev_gray, curr_gray, corners, lk, config.fb_max_error_px)
+        else:
+            # Track pass-1 inliers against curr brought back into prev's frame: what LK sees is only the
+            # residual motion (a pixel or less), so one pyramid level and no backward check suffice.
+            target = _warp_gray(curr_gray, curr_from_prev)
+            refine_lk = dict(lk, maxLevel=1)
+            prev_pts, target_pts = _track(prev_gray, target, result.prev_points[result.inliers], refine_lk, None)
+            curr_pts = geometry.apply(curr_from_prev, target_pts).astype(np.float32)
         if len(prev_pts) < config.min_inliers:
             if lk_pass > 0:
                 break  # keep the previous pass's estimate
@@ -172,15 +174,16 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
                                  inliers=np.zeros(len(prev_pts), bool))
         matrix, inlier_mask = _fit_model(prev_pts, curr_pts, config)
         inliers = np.zeros(len(prev_pts), bool) if inlier_mask is None else inlier_mask.ravel().astype(bool)
-        result = _WorkEstimate(curr_from_prev, None, n_tracked=len(prev_pts), n_inliers=int(inliers.sum()),
+        n_tracked = len(prev_pts) if lk_pass == 0 else result.n_tracked
+        result = _WorkEstimate(curr_from_prev, None, n_tracked=n_tracked, n_inliers=int(inliers.sum()),
                                prev_points=prev_pts, curr_points=curr_pts, inliers=inliers)
         if matrix is None or not np.all(np.isfinite(matrix)):
             result.failure = "model fit failed"
             return result
         curr_from_prev = geometry.to_3x3(matrix)
         result.curr_from_prev = curr_from_prev
-        if result.n_inliers < config.min_inliers or result.n_inliers < config.min_inlier_ratio * len(prev_pts):
-            result.failure = f"too few inliers ({result.n_inliers} of {len(prev_pts)})"
+        if result.n_inliers < config.min_inliers or result.n_inliers < config.min_inlier_ratio * n_tracked:
+            result.failure = f"too few inliers ({result.n_inliers} of {n_tracked})"
             return result
     inl = result.inliers
     projected = geometry.apply(result.curr_from_prev, result.prev_points[inl])
@@ -188,14 +191,40 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
     return result
 
 
+def _detect_corners(gray: np.ndarray, config: MotionConfig) -> np.ndarray:
+    """Shi-Tomasi corners spread over a grid of cells, each cell with its own quota and quality scale.
+
+    Detected globally, the strongest corners crowd onto the most textured thing in view, often a moving
+    object, and RANSAC then fits a compromise. Per-cell quotas make the vote follow image area instead.
+    """
+    height, width = gray.shape
+    cols, rows = config.corner_grid
+    per_cell = max(4, config.max_corners // (cols * rows))
+    found = []
+    for r in range(rows):
+        y0, y1 = r * height // rows, (r + 1) * height // rows
+        for c in range(cols):
+            x0, x1 = c * width // cols, (c + 1) * width // cols
+            cell = gray[y0:y1, x0:x1]
+            if cell.shape[0] < 8 or cell.shape[1] < 8 or int(cell.max()) - int(cell.min()) < 8:
+                continue  # flat cell (sky, black border): nothing trackable
+            corners = cv2.goodFeaturesToTrack(cell, maxCorners=per_cell, qualityLevel=config.corner_quality * 10,
+                                              minDistance=config.corner_min_distance, blockSize=7)
+            if corners is not None:
+                found.append(corners.reshape(-1, 2) + (x0, y0))
+    return np.concatenate(found).astype(np.float32) if found else np.zeros((0, 2), np.float32)
+
+
 def _track(prev_gray: np.ndarray, curr_gray: np.ndarray, corners: np.ndarray, lk: dict,
-           fb_max_error_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pyramidal LK from prev to curr, keeping tracks that come back to their start (forward-backward check)."""
+           fb_max_error_px: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Pyramidal LK from prev to curr; with ``fb_max_error_px``, keeps only tracks that come back to their start."""
     start = corners.reshape(-1, 1, 2).astype(np.float32)
     tracked, status, _ = cv2.calcOpticalFlowPyrLK(prev_gray, curr_gray, start, None, **lk)
-    back, status_back, _ = cv2.calcOpticalFlowPyrLK(curr_gray, prev_gray, tracked, None, **lk)
-    fb_error = np.linalg.norm((back - start).reshape(-1, 2), axis=1)
-    good = (status.ravel() == 1) & (status_back.ravel() == 1) & (fb_error < fb_max_error_px)
+    good = status.ravel() == 1
+    if fb_max_error_px is not None:
+        back, status_back, _ = cv2.calcOpticalFlowPyrLK(curr_gray, prev_gray, tracked, None, **lk)
+        fb_error = np.linalg.norm((back - start).reshape(-1, 2), axis=1)
+        good &= (status_back.ravel() == 1) & (fb_error < fb_max_error_px)
     return start.reshape(-1, 2)[good], tracked.reshape(-1, 2)[good]
 
 

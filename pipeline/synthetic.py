@@ -1,0 +1,637 @@
+"""Synthetic hand-held video with exact ground truth: the built-in demo input and the basis of truth tests.
+
+A wide "world" canvas (a real photograph from ``skimage.data``, upscaled so that every camera view plus a
+generous margin lies inside it) is filmed by a virtual camera whose path is a smooth intentional path (a slow
+pan plus slow sinusoidal drift and roll) with hand-held jitter on top (band-limited random translation, roll
+and zoom). A textured disc (the mission patch from ``skimage.data.astronaut``, with a green rim) moves
+through the world on its own path and is composited into the world before the camera warp. A few frames are
+motion-blurred with a known linear kernel; their sharp versions are kept.
+
+Coordinate convention (whole project): ``a_from_b`` is a 3x3 homogeneous matrix mapping pixel coordinates in
+``b`` to pixel coordinates in ``a``, acting on column vectors ``(x, y, 1)``; x right, y down, the centre of
+pixel (0, 0) is the coordinate (0, 0) (as ``cv2.warpAffine`` uses). Hence::
+
+    frame_t == cv2.warpAffine(world_with_object_at_t, frame_from_world[t][:2], (W, H), flags=cv2.INTER_CUBIC)
+
+Camera model: the frame of time t shows the world point ``c_t`` at the frame centre, with the camera rolled by
+``theta_t`` (radians, positive = clockwise on screen, i.e. the usual rotation matrix acting on y-down
+coordinates) and zoomed by ``s_t`` (frame pixels per world pixel)::
+
+    world_from_frame = T(c) @ R(theta) @ S(1 / s) @ T(-frame_centre)
+
+The jitter is added to these parameters: ``c = c_int + dc``, ``theta = theta_int + dtheta``,
+``s = s_int * (1 + ds)``, each a zero-mean band-limited Gaussian process (default band 1.5-6 Hz, 4th order
+Butterworth-shaped amplitude spectrum) normalised to the configured standard deviation over the clip.
+
+This module never imports rerun or matplotlib.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "SyntheticConfig",
+    "SyntheticVideo",
+    "generate",
+    "write_video",
+    "make_two_frames",
+    "motion_blur_kernel",
+    "apply_blur",
+    "load_image",
+    "default_blurred_frames",
+    "warp",
+    "psnr",
+]
+
+# The textured disc that moves through the world: the round mission patch on the astronaut's sleeve.
+_PATCH_CENTRE_XY = (172, 385)  # in skimage.data.astronaut() pixel coordinates
+_PATCH_RADIUS = 37.0  # source pixels
+_RIM_COLOUR = (40, 220, 90)  # saturated green rim, absent from the default photographs
+_RIM_WIDTH = 3.0  # source pixels
+
+# Pixels kept between any rendered pixel's footprint and the world canvas edge (cubic support is 2 px).
+_INTERP_PAD = 3.0
+
+
+@dataclass(frozen=True)
+class SyntheticConfig:
+    """Everything that defines a synthetic clip; the clip is a deterministic function of this."""
+
+    width: int = 640
+    height: int = 360
+    n_frames: int = 90
+    fps: float = 30.0
+    image: str = "coffee"  # skimage.data name of the world photograph (coffee, astronaut, rocket, chelsea, ...)
+    seed: int = 0
+    # Hand-held jitter (standard deviations over the clip).
+    jitter_px: float = 6.0  # translation, per axis, pixels
+    jitter_deg: float = 1.0  # roll, degrees
+    jitter_scale: float = 0.01  # relative zoom
+    jitter_band_hz: tuple[float, float] = (1.5, 6.0)  # pass band of the jitter spectrum
+    # Intentional (smooth) motion.
+    pan_px_per_frame: float = 1.5  # steady horizontal pan
+    drift_px: float = 8.0  # amplitude of the slow sinusoidal drift (x; y gets 0.6x this)
+    drift_deg: float = 0.5  # amplitude of the slow intentional roll
+    drift_hz: float = 0.25  # frequency of the slow drift (well below the jitter band)
+    # Moving foreground object.
+    moving_object: bool = True
+    object_radius_px: float = 40.0
+    # Motion blur.
+    blurred_frames: tuple[int, ...] | None = None  # None -> default_blurred_frames(n_frames); () -> none
+    blur_length_px: float = 12.0
+    blur_angle_deg: float = 20.0  # direction (cos a, sin a) in y-down pixel coordinates (clockwise on screen)
+    # World canvas.
+    world_margin: float = 0.12  # extra world around every (actual and intended) view, as a fraction of W and H
+    min_world_scale: float = 1.0  # the photograph is upscaled by at least this factor
+
+
+@dataclass
+class SyntheticVideo:
+    """A rendered clip and its exact truth. Transforms follow the ``a_from_b`` convention of the module."""
+
+    frames: list[np.ndarray]  # rendered input frames, RGB uint8 (H, W, 3), blur applied where chosen
+    sharp_frames: list[np.ndarray]  # the same without blur
+    frame_from_world: np.ndarray  # (N, 3, 3) float64
+    intended_frame_from_world: np.ndarray  # (N, 3, 3) the smooth intentional path, no jitter
+    curr_from_prev: np.ndarray  # (N, 3, 3) background motion frame t-1 -> frame t; [0] = identity
+    object_mask: list[np.ndarray]  # bool (H, W): the object's footprint (coverage >= 0.5) in the sharp frame
+    blurred: tuple[int, ...]
+    blur_kernel: np.ndarray  # float32 (odd kh, odd kw), centre (kh//2, kw//2), sums to 1, point-symmetric (so correlation == convolution)
+    config: SyntheticConfig
+    world: np.ndarray  # the world canvas, RGB uint8, without the object
+    # Extras (not needed to construct by hand).
+    intended_params: np.ndarray | None = None  # (N, 4): cx, cy (world px), theta (rad), zoom
+    jitter_params: np.ndarray | None = None  # (N, 4): dcx, dcy (world px), dtheta (rad), dzoom (relative)
+    object_world_from_patch: np.ndarray | None = None  # (N, 3, 3) pose of the object patch in the world
+    object_patch: np.ndarray | None = None  # RGB uint8 (P, P, 3): the object texture
+    object_alpha: np.ndarray | None = None  # float32 (P, P): its coverage (disc, anti-aliased edge)
+
+    # ------------------------------------------------------------------ derived truth
+    @property
+    def n_frames(self) -> int:
+        return len(self.frames)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the frames."""
+        return self.config.width, self.config.height
+
+    @property
+    def intended_from_frame(self) -> np.ndarray:
+        """(N, 3, 3) the ideal stabilising warp: maps frame t pixels to the intended (jitter-free) view t."""
+        return self.intended_frame_from_world @ np.linalg.inv(self.frame_from_world)
+
+    @property
+    def intended_curr_from_prev(self) -> np.ndarray:
+        """(N, 3, 3) inter-frame motion of the intended path alone; [0] = identity."""
+        return _curr_from_prev(self.intended_frame_from_world)
+
+    @property
+    def object_center_world(self) -> np.ndarray:
+        """(N, 2) world coordinates of the object's centre (NaN rows when there is no object)."""
+        if self.object_world_from_patch is None or self.object_patch is None:
+            return np.full((self.n_frames, 2), np.nan)
+        c = (self.object_patch.shape[1] - 1) / 2.0
+        p = self.object_world_from_patch @ np.array([c, c, 1.0])
+        return p[:, :2] / p[:, 2:3]
+
+    @property
+    def object_center_frame(self) -> np.ndarray:
+        """(N, 2) frame coordinates of the object's centre (may lie outside the frame)."""
+        cw = self.object_center_world
+        h = np.concatenate([cw, np.ones((len(cw), 1))], axis=1)
+        p = np.einsum("nij,nj->ni", self.frame_from_world, h)
+        return p[:, :2] / p[:, 2:3]
+
+    def is_blurred(self, t: int) -> bool:
+        return t in self.blurred
+
+    # ------------------------------------------------------------------ rendering truth
+    def world_at(self, t: int) -> np.ndarray:
+        """The world canvas with the object composited at its pose of time t (a new array)."""
+        canvas = self.world.copy()
+        if self.object_world_from_patch is not None and self.object_patch is not None:
+            _composite(canvas, self.object_patch, self.object_alpha, self.object_world_from_patch[t])
+        return canvas
+
+    def render_view(self, t: int, view_from_frame: np.ndarray, *, sharp: bool = True) -> np.ndarray:
+        """Truth for any virtual camera: the world (with the object at time t) seen through
+        ``view_from_world = view_from_frame @ frame_from_world[t]``; same size as the frames.
+
+        With ``sharp=False`` and t a blurred frame, the frame's blur kernel is applied to the rendered view
+        (exact for the identity view; an approximation for views that rotate/zoom relative to frame t).
+        Parts of the view outside the world canvas (see ``view_coverage``) are reflected, not truth.
+        """
+        view_from_world = _as3x3(view_from_frame) @ self.frame_from_world[t]
+        img = warp(self.world_at(t), view_from_world, self.size, interpolation=cv2.INTER_CUBIC)
+        if not sharp and t in self.blurred:
+            img = apply_blur(img, self.blur_kernel)
+        return img
+
+    def view_coverage(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
+        """bool (H, W): where ``render_view(t, view_from_frame)`` samples inside the world canvas (true truth)."""
+        view_from_world = _as3x3(view_from_frame) @ self.frame_from_world[t]
+        ones = np.ones(self.world.shape[:2], np.uint8)
+        cov = warp(ones, view_from_world, self.size, interpolation=cv2.INTER_NEAREST, border_value=0)
+        return cov > 0
+
+    def frame_coverage(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
+        """bool (H, W): where a view ``view_from_frame`` of frame t sees pixels inside input frame t
+        (False = region a full-frame method must complete from other frames)."""
+        ones = np.ones((self.config.height, self.config.width), np.uint8)
+        cov = warp(ones, _as3x3(view_from_frame), self.size, interpolation=cv2.INTER_NEAREST, border_value=0)
+        return cov > 0
+
+
+# ---------------------------------------------------------------------- small public helpers
+
+
+def load_image(name: str) -> np.ndarray:
+    """An RGB uint8 photograph from ``skimage.data`` by name (grey images are stacked, alpha dropped)."""
+    import skimage.data
+
+    loader = getattr(skimage.data, name, None)
+    if loader is None or not callable(loader):
+        raise ValueError(f"unknown skimage.data image {name!r}")
+    img = np.asarray(loader())
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    img = img[:, :, :3]
+    if img.dtype != np.uint8:
+        f = img.astype(np.float64)
+        f = (f - f.min()) / max(f.max() - f.min(), 1e-12)
+        img = np.round(f * 255).astype(np.uint8)
+    return np.ascontiguousarray(img)
+
+
+def default_blurred_frames(n_frames: int) -> tuple[int, ...]:
+    """Three of every ten frames, each isolated between sharp neighbours: t % 10 in {2, 5, 8},
+    never the first or the last frame."""
+    return tuple(t for t in range(1, n_frames - 1) if t % 10 in (2, 5, 8))
+
+
+def motion_blur_kernel(length_px: float, angle_deg: float) -> np.ndarray:
+    """Linear motion-blur kernel: a uniform line segment of ``length_px`` centred on the kernel centre, in the
+    direction (cos a, sin a) of y-down pixel coordinates, anti-aliased by bilinear splatting. float32, odd
+    (rows, cols) cropped to its support, centre at (rows // 2, cols // 2), sums to 1, point-symmetric (so ``cv2.filter2D`` correlation equals convolution)."""
+    length = float(length_px)
+    if length <= 1e-6:
+        return np.ones((1, 1), np.float32)
+    half = int(math.ceil(length / 2.0)) + 1
+    size = 2 * half + 1
+    k = np.zeros((size, size), np.float64)
+    a = math.radians(angle_deg)
+    dx, dy = math.cos(a), math.sin(a)
+    n = max(16, int(math.ceil(length * 16)))
+    # Symmetric sample positions along the segment -> a point-symmetric kernel.
+    u = (np.arange(n) + 0.5) / n * length - length / 2.0
+    xs, ys = half + u * dx, half + u * dy
+    x0, y0 = np.floor(xs).astype(int), np.floor(ys).astype(int)
+    fx, fy = xs - x0, ys - y0
+    for ox, oy, w in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        np.add.at(k, (y0 + oy, x0 + ox), w)
+    k[k < 1e-6 * k.max()] = 0.0  # drop float dust from splats landing exactly on pixel centres
+    k = 0.5 * (k + k[::-1, ::-1])  # exact point symmetry despite float round-off
+    # Crop all-zero border rows/columns symmetrically (keeps the centre; a smaller kernel filters faster).
+    rows, cols = np.nonzero(k.sum(axis=1))[0], np.nonzero(k.sum(axis=0))[0]
+    ry = max(half - rows.min(), rows.max() - half)
+    rx = max(half - cols.min(), cols.max() - half)
+    k = k[half - ry : half + ry + 1, half - rx : half + rx + 1]
+    return (k / k.sum()).astype(np.float32)
+
+
+def apply_blur(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Blur an image (uint8 or float) with a kernel, reflecting at the borders; same dtype out."""
+    return cv2.filter2D(image, -1, np.asarray(kernel, np.float32), borderType=cv2.BORDER_REFLECT)
+
+
+def warp(
+    image: np.ndarray,
+    dst_from_src: np.ndarray,
+    size: tuple[int, int],
+    *,
+    interpolation: int = cv2.INTER_CUBIC,
+    border_value: float | None = None,
+) -> np.ndarray:
+    """Render ``image`` through ``dst_from_src`` (3x3 or 2x3) into a ``size`` = (width, height) image, with
+    warpAffine when the last row is (0, 0, 1), else warpPerspective. Outside the source: reflected, or the
+    constant ``border_value`` when one is given."""
+    m = _as3x3(dst_from_src)
+    m = m / m[2, 2]
+    if border_value is None:
+        mode, value = cv2.BORDER_REFLECT, 0
+    else:
+        mode, value = cv2.BORDER_CONSTANT, border_value
+    w, h = int(size[0]), int(size[1])
+    if abs(m[2, 0]) < 1e-12 and abs(m[2, 1]) < 1e-12:
+        return cv2.warpAffine(image, m[:2], (w, h), flags=interpolation, borderMode=mode, borderValue=value)
+    return cv2.warpPerspective(image, m, (w, h), flags=interpolation, borderMode=mode, borderValue=value)
+
+
+def psnr(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """PSNR in dB for 8-bit images over ``mask`` (bool (H, W)) or everything."""
+    d = a.astype(np.float64) - b.astype(np.float64)
+    if mask is not None:
+        d = d[mask]
+    mse = float(np.mean(d * d)) if d.size else 0.0
+    return float("inf") if mse == 0 else 10.0 * math.log10(255.0**2 / mse)
+
+
+# ---------------------------------------------------------------------- internals
+
+
+def _as3x3(m: np.ndarray) -> np.ndarray:
+    m = np.asarray(m, np.float64)
+    if m.shape == (2, 3):
+        m = np.vstack([m, [0.0, 0.0, 1.0]])
+    if m.shape != (3, 3):
+        raise ValueError(f"expected a 3x3 (or 2x3) transform, got shape {m.shape}")
+    return m
+
+
+def _translation(x: float, y: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, x], [0.0, 1.0, y], [0.0, 0.0, 1.0]])
+
+
+def _rotation(theta: float) -> np.ndarray:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _scaling(s: float) -> np.ndarray:
+    return np.diag([s, s, 1.0])
+
+
+def _frame_from_world(cx: float, cy: float, theta: float, zoom: float, fc: tuple[float, float]) -> np.ndarray:
+    """Inverse of world_from_frame = T(c) R(theta) S(1/zoom) T(-fc)."""
+    return _translation(*fc) @ _scaling(zoom) @ _rotation(-theta) @ _translation(-cx, -cy)
+
+
+def _curr_from_prev(frame_from_world: np.ndarray) -> np.ndarray:
+    out = np.empty_like(frame_from_world)
+    out[0] = np.eye(3)
+    if len(frame_from_world) > 1:
+        out[1:] = frame_from_world[1:] @ np.linalg.inv(frame_from_world[:-1])
+    return out
+
+
+def _apply(m: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Apply (..., 3, 3) transforms to (K, 2) points -> (..., K, 2)."""
+    h = np.concatenate([pts, np.ones((len(pts), 1))], axis=1)
+    p = np.einsum("...ij,kj->...ki", m, h)
+    return p[..., :2] / p[..., 2:3]
+
+
+def _corners(w: float, h: float, mx: float = 0.0, my: float = 0.0) -> np.ndarray:
+    return np.array([[-mx, -my], [w - 1 + mx, -my], [w - 1 + mx, h - 1 + my], [-mx, h - 1 + my]], np.float64)
+
+
+def _band_limited_noise(rng: np.random.Generator, n: int, fps: float, band: tuple[float, float], order: int = 4) -> np.ndarray:
+    """Zero-mean, unit-std (over the n samples) Gaussian noise with a band-pass amplitude spectrum
+    |H(f)| = 1/sqrt(1+(f_lo/f)^2k) * 1/sqrt(1+(f/f_hi)^2k). Generated on a long buffer so the band is
+    resolved even for short clips, then truncated."""
+    length = max(2 * n, int(math.ceil(8 * fps)), 64)
+    white = rng.standard_normal(length)
+    if n <= 1:
+        return np.zeros(n)
+    spec = np.fft.rfft(white)
+    f = np.fft.rfftfreq(length, d=1.0 / fps)
+    f_lo, f_hi = float(band[0]), float(band[1])
+    with np.errstate(divide="ignore"):
+        hp = 1.0 / np.sqrt(1.0 + (f_lo / np.maximum(f, 1e-12)) ** (2 * order)) if f_lo > 0 else np.ones_like(f)
+    lp = 1.0 / np.sqrt(1.0 + (f / f_hi) ** (2 * order))
+    gain = hp * lp
+    gain[0] = 0.0
+    x = np.fft.irfft(spec * gain, length)[:n]
+    x = x - x.mean()
+    sd = x.std()
+    return x / sd if sd > 0 else x
+
+
+def _object_texture(world_image: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """The mission patch cut out as an RGB square with an anti-aliased disc alpha and a green rim (colour
+    negated when the world itself is the astronaut photograph, so the object never matches its background)."""
+    import skimage.data
+
+    src = np.asarray(skimage.data.astronaut())[:, :, :3]
+    r = _PATCH_RADIUS
+    half = int(math.ceil(r)) + 3
+    cx, cy = _PATCH_CENTRE_XY
+    rgb = src[cy - half : cy + half + 1, cx - half : cx + half + 1].astype(np.float32)
+    yy, xx = np.mgrid[-half : half + 1, -half : half + 1].astype(np.float32)
+    dist = np.sqrt(xx * xx + yy * yy)
+    alpha = np.clip(r - dist + 0.5, 0.0, 1.0).astype(np.float32)
+    rim = np.clip(dist - (r - _RIM_WIDTH) + 0.5, 0.0, 1.0)[:, :, None]
+    if world_image == "astronaut":
+        rgb = 255.0 - rgb
+    rgb = rgb * (1.0 - rim) + np.asarray(_RIM_COLOUR, np.float32) * rim
+    return np.clip(np.round(rgb), 0, 255).astype(np.uint8), alpha
+
+
+def _composite(canvas: np.ndarray, patch: np.ndarray, alpha: np.ndarray, world_from_patch: np.ndarray):
+    """Alpha-composite the patch into the canvas in place at its pose; returns (y0, y1, x0, x1, saved region)
+    so the caller can restore the canvas, or None when the patch misses the canvas."""
+    ph, pw = alpha.shape
+    hw, ww = canvas.shape[:2]
+    pts = _apply(world_from_patch, _corners(pw, ph, 1.0, 1.0))
+    x0 = max(int(math.floor(pts[:, 0].min())) - 2, 0)
+    y0 = max(int(math.floor(pts[:, 1].min())) - 2, 0)
+    x1 = min(int(math.ceil(pts[:, 0].max())) + 3, ww)
+    y1 = min(int(math.ceil(pts[:, 1].max())) + 3, hw)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    local = _translation(-x0, -y0) @ world_from_patch
+    size = (x1 - x0, y1 - y0)
+    rgb = cv2.warpAffine(patch, local[:2], size, flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+    a = cv2.warpAffine(alpha, local[:2], size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    region = canvas[y0:y1, x0:x1]
+    saved = region.copy()
+    a3 = a[:, :, None]
+    blended = rgb.astype(np.float32) * a3 + region.astype(np.float32) * (1.0 - a3)
+    region[...] = np.clip(np.round(blended), 0, 255).astype(np.uint8)
+    return y0, y1, x0, x1, saved
+
+
+def _object_mask(alpha: np.ndarray, frame_from_patch: np.ndarray, w: int, h: int) -> np.ndarray:
+    """bool (h, w): where the patch's coverage (bilinear) is >= 0.5, warped only over its bounding box."""
+    mask = np.zeros((h, w), bool)
+    ph, pw = alpha.shape
+    pts = _apply(frame_from_patch, _corners(pw, ph, 1.0, 1.0))
+    x0 = max(int(math.floor(pts[:, 0].min())) - 1, 0)
+    y0 = max(int(math.floor(pts[:, 1].min())) - 1, 0)
+    x1 = min(int(math.ceil(pts[:, 0].max())) + 2, w)
+    y1 = min(int(math.ceil(pts[:, 1].max())) + 2, h)
+    if x1 > x0 and y1 > y0:
+        local = _translation(-x0, -y0) @ frame_from_patch
+        a = cv2.warpAffine(
+            alpha, local[:2], (x1 - x0, y1 - y0), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0
+        )
+        mask[y0:y1, x0:x1] = a >= 0.5
+    return mask
+
+
+def _check_coverage(world_shape: tuple[int, ...], frame_from_world: np.ndarray, w: int, h: int, what: str) -> None:
+    pts = _apply(np.linalg.inv(frame_from_world), _corners(w, h))  # (N, 4, 2) world coords of frame corners
+    hw, ww = world_shape[:2]
+    lo = _INTERP_PAD - 1.0
+    bad = (pts[..., 0] < lo) | (pts[..., 0] > ww - 1 - lo) | (pts[..., 1] < lo) | (pts[..., 1] > hw - 1 - lo)
+    if bad.any():
+        t = int(np.argwhere(bad.any(axis=1))[0, 0])
+        raise RuntimeError(f"synthetic {what} frame {t} is not covered by the {ww}x{hw} world canvas")
+
+
+# ---------------------------------------------------------------------- generation
+
+
+def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
+    """Render a synthetic hand-held clip and its truth; deterministic given the config (seed included)."""
+    cfg = config
+    w, h, n, fps = int(cfg.width), int(cfg.height), int(cfg.n_frames), float(cfg.fps)
+    if w < 8 or h < 8 or n < 1 or fps <= 0:
+        raise ValueError(f"bad synthetic config: {w}x{h}, {n} frames at {fps} fps")
+    rng = np.random.default_rng(cfg.seed)
+    fc = ((w - 1) / 2.0, (h - 1) / 2.0)
+    t = np.arange(n, dtype=np.float64)
+    sec = t / fps
+
+    # Intended path: steady pan + slow drift and roll (all well below the jitter band).
+    ph = rng.uniform(0.0, 2.0 * math.pi, size=3)
+    f0 = cfg.drift_hz
+    icx = cfg.pan_px_per_frame * t + cfg.drift_px * np.sin(2 * math.pi * f0 * sec + ph[0])
+    icy = 0.6 * cfg.drift_px * np.sin(2 * math.pi * 0.8 * f0 * sec + ph[1])
+    ith = math.radians(cfg.drift_deg) * np.sin(2 * math.pi * 0.6 * f0 * sec + ph[2])
+    izm = np.ones(n)
+
+    # Hand-held jitter: independent band-limited processes, normalised to the configured std.
+    band = cfg.jitter_band_hz
+    jx = cfg.jitter_px * _band_limited_noise(rng, n, fps, band)
+    jy = cfg.jitter_px * _band_limited_noise(rng, n, fps, band)
+    jth = math.radians(cfg.jitter_deg) * _band_limited_noise(rng, n, fps, band)
+    jzm = cfg.jitter_scale * _band_limited_noise(rng, n, fps, band)
+
+    # Object path parameters (drawn now so the random stream does not depend on later choices).
+    direction = 1.0 if rng.random() < 0.5 else -1.0
+    obj_y = rng.uniform(0.08, 0.2, size=2) * h * np.array([1.0, -1.0]) * (1 if rng.random() < 0.5 else -1)
+    obj_spin = math.radians(rng.uniform(-1.0, 1.0))  # per frame
+    obj_bob_phase = rng.uniform(0.0, 2.0 * math.pi)
+
+    def fw(cx, cy, th, zm):
+        return np.stack([_frame_from_world(cx[i], cy[i], th[i], zm[i], fc) for i in range(n)])
+
+    f_int = fw(icx, icy, ith, izm)
+    f_act = fw(icx + jx, icy + jy, ith + jth, izm * (1.0 + jzm))
+
+    # World canvas: cover every actual and intended view grown by the margin, plus interpolation padding.
+    mx, my = cfg.world_margin * w, cfg.world_margin * h
+    grown = _corners(w, h, mx, my)
+    pts = np.concatenate(
+        [_apply(np.linalg.inv(f_act), grown).reshape(-1, 2), _apply(np.linalg.inv(f_int), grown).reshape(-1, 2)]
+    )
+    xmin, ymin = pts.min(axis=0) - _INTERP_PAD
+    xmax, ymax = pts.max(axis=0) + _INTERP_PAD
+    photo = load_image(cfg.image)
+    pw, phh = photo.shape[1], photo.shape[0]
+    scale = max((xmax - xmin + 1) / pw, (ymax - ymin + 1) / phh, float(cfg.min_world_scale))
+    ww, wh = int(math.ceil(scale * pw)), int(math.ceil(scale * phh))
+    world = cv2.resize(photo, (ww, wh), interpolation=cv2.INTER_CUBIC if scale >= 1 else cv2.INTER_AREA)
+    shift_x = (ww - 1) / 2.0 - (xmin + xmax) / 2.0
+    shift_y = (wh - 1) / 2.0 - (ymin + ymax) / 2.0
+    icx = icx + shift_x
+    icy = icy + shift_y
+    f_int = fw(icx, icy, ith, izm)
+    f_act = fw(icx + jx, icy + jy, ith + jth, izm * (1.0 + jzm))
+    _check_coverage(world.shape, f_act, w, h, "input")
+    _check_coverage(world.shape, f_int, w, h, "intended")
+
+    # Moving object: its own straight path across the (linear part of the) intended view, plus a bob and spin.
+    obj_patch = obj_alpha = obj_pose = None
+    if cfg.moving_object:
+        obj_patch, obj_alpha = _object_texture(cfg.image)
+        half = (obj_alpha.shape[0] - 1) / 2.0
+        k = cfg.object_radius_px / _PATCH_RADIUS
+        frac = t / max(n - 1, 1)
+        base_x = cfg.pan_px_per_frame * t + shift_x
+        ox = base_x + direction * (-0.3 + 0.6 * frac) * w
+        oy = shift_y + obj_y[0] + (obj_y[1] - obj_y[0]) * frac + 0.04 * h * np.sin(2 * math.pi * 0.5 * sec + obj_bob_phase)
+        obj_pose = np.stack(
+            [
+                _translation(ox[i], oy[i]) @ _rotation(obj_spin * t[i]) @ _scaling(k) @ _translation(-half, -half)
+                for i in range(n)
+            ]
+        )
+
+    # Render.
+    blurred = default_blurred_frames(n) if cfg.blurred_frames is None else tuple(sorted(set(int(i) for i in cfg.blurred_frames)))
+    for i in blurred:
+        if not 0 <= i < n:
+            raise ValueError(f"blurred frame index {i} outside 0..{n - 1}")
+    kernel = motion_blur_kernel(cfg.blur_length_px, cfg.blur_angle_deg)
+    blurred_set = set(blurred)
+    canvas = world.copy()
+    frames, sharp_frames, masks = [], [], []
+    for i in range(n):
+        saved = None
+        if obj_pose is not None:
+            saved = _composite(canvas, obj_patch, obj_alpha, obj_pose[i])
+        sharp = cv2.warpAffine(canvas, f_act[i][:2], (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        if saved is not None:
+            y0, y1, x0, x1, region = saved
+            canvas[y0:y1, x0:x1] = region
+        sharp_frames.append(sharp)
+        frames.append(apply_blur(sharp, kernel) if i in blurred_set else sharp.copy())
+        masks.append(_object_mask(obj_alpha, f_act[i] @ obj_pose[i], w, h) if obj_pose is not None else np.zeros((h, w), bool))
+
+    return SyntheticVideo(
+        frames=frames,
+        sharp_frames=sharp_frames,
+        frame_from_world=f_act,
+        intended_frame_from_world=f_int,
+        curr_from_prev=_curr_from_prev(f_act),
+        object_mask=masks,
+        blurred=blurred,
+        blur_kernel=kernel,
+        config=cfg,
+        world=world,
+        intended_params=np.stack([icx, icy, ith, izm], axis=1),
+        jitter_params=np.stack([jx, jy, jth, jzm], axis=1),
+        object_world_from_patch=obj_pose,
+        object_patch=obj_patch,
+        object_alpha=obj_alpha,
+    )
+
+
+# ---------------------------------------------------------------------- output
+
+
+def write_video(
+    video: SyntheticVideo | Sequence[np.ndarray],
+    path,
+    *,
+    fps: float | None = None,
+    crf: int = 12,
+    sharp: bool = False,
+) -> None:
+    """Write frames (``video.frames``, or ``video.sharp_frames`` with ``sharp=True``, or a list of RGB uint8
+    frames) to a video file with PyAV: libx264, yuv420p, ``crf`` (0 = lossless in YUV), the config fps."""
+    import av
+
+    if isinstance(video, SyntheticVideo):
+        frames = video.sharp_frames if sharp else video.frames
+        rate = video.config.fps if fps is None else fps
+    else:
+        frames = list(video)
+        rate = 30.0 if fps is None else fps
+    if not frames:
+        raise ValueError("no frames to write")
+    h, w = frames[0].shape[:2]
+    if w % 2 or h % 2:
+        raise ValueError(f"yuv420p needs even frame sizes, got {w}x{h}")
+    container = av.open(str(Path(path)), mode="w")
+    try:
+        stream = container.add_stream("libx264", rate=Fraction(rate).limit_denominator(1001))
+        stream.width, stream.height = w, h
+        stream.pix_fmt = "yuv420p"
+        stream.options = {"qp": "0"} if crf <= 0 else {"crf": str(int(crf))}
+        for f in frames:
+            arr = np.ascontiguousarray(f, dtype=np.uint8)
+            for packet in stream.encode(av.VideoFrame.from_ndarray(arr, format="rgb24")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    finally:
+        container.close()
+
+
+# ---------------------------------------------------------------------- two-frame helper
+
+
+def make_two_frames(
+    transform: np.ndarray,
+    *,
+    size: tuple[int, int] = (640, 360),
+    image: str = "astronaut",
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Two views of a photograph related by a known motion, for motion-estimation tests.
+
+    ``frame0`` is a view of ``image``; ``frame1`` is the same static scene under ``curr_from_prev = transform``
+    (3x3 affine or homography, or 2x3), i.e. ``frame1(transform @ p) == frame0(p)``. Both are rendered directly
+    from the photograph (one resampling each, INTER_CUBIC) and are fully covered: the photograph is scaled so
+    that both views, plus a few pixels of interpolation padding, lie inside it. ``seed`` picks where in the
+    slack the view sits. Returns (frame0, frame1), RGB uint8 (H, W, 3).
+    """
+    w, h = int(size[0]), int(size[1])
+    m = _as3x3(transform)
+    m = m / m[2, 2]
+    photo = load_image(image)
+    pw, phh = photo.shape[1], photo.shape[0]
+    corners = _corners(w, h)
+    # Frame-1 corners in frame-0 coordinates.
+    inv = np.linalg.inv(m)
+    hc = np.concatenate([corners, np.ones((4, 1))], axis=1) @ inv.T
+    if np.any(hc[:, 2] <= 1e-9):
+        raise ValueError("transform maps frame corners to infinity")
+    c1 = hc[:, :2] / hc[:, 2:3]
+    pts = np.concatenate([corners, c1])
+    lo = pts.min(axis=0) - _INTERP_PAD
+    hi = pts.max(axis=0) + _INTERP_PAD
+    ext = hi - lo
+    # photo px -> frame0 px is a zoom k >= 1; the photo must be at least ext in frame-0 pixels.
+    k = max(ext[0] / (pw - 1), ext[1] / (phh - 1)) * 1.02
+    slack = np.array([(pw - 1) * k - ext[0], (phh - 1) * k - ext[1]])  # frame-0 px of freedom
+    rng = np.random.default_rng(seed)
+    off = rng.uniform(0.0, 1.0, size=2) * np.maximum(slack, 0.0)
+    # frame0_from_photo: photo (0,0) lands at lo - off in frame-0 coordinates.
+    f0 = _translation(lo[0] - off[0], lo[1] - off[1]) @ _scaling(k)
+    f1 = m @ f0
+    frame0 = warp(photo, f0, (w, h), interpolation=cv2.INTER_CUBIC)
+    frame1 = warp(photo, f1, (w, h), interpolation=cv2.INTER_CUBIC)
+    return frame0, frame1

@@ -1,0 +1,577 @@
+"""The project's only video I/O layer, on PyAV: probe, count, read upright RGB frames, write H.264.
+
+Frames are numpy RGB uint8 arrays of shape (H, W, 3). The reader applies the container's rotation,
+so frames are upright and the writer stores them with no rotation tag. Every expected failure is
+raised as InputError or OutputError with a one-line message that names the file.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+from collections.abc import Iterator
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from types import TracebackType
+
+import av
+import av.error
+import numpy as np
+
+from pipeline.errors import InputError, OutputError
+
+# Output suffix -> FFmpeg muxer name. H.264 + AAC plays from all three.
+OUTPUT_FORMATS = {".mp4": "mp4", ".mov": "mov", ".mkv": "matroska"}
+
+# Audio codecs copied into each output format as they are; anything else is transcoded to AAC.
+# Narrower than what the muxers claim: they accept PCM or Vorbis in MP4, which players often do not
+# play, and claim FLAC in MOV, which then fails to mux.
+COPYABLE_AUDIO_CODECS = {
+    "mp4": frozenset({"aac", "mp3", "opus", "alac", "ac3", "eac3", "flac"}),
+    "mov": frozenset(
+        {"aac", "mp3", "alac", "ac3", "eac3", "pcm_s16le", "pcm_s16be", "pcm_s24le", "pcm_s24be"}
+    ),
+    "matroska": frozenset(
+        {"aac", "mp3", "opus", "vorbis", "alac", "ac3", "eac3", "flac", "pcm_s16le", "pcm_s24le", "pcm_f32le"}
+    ),
+}
+# What the AAC encoder accepts when transcoding: other layouts become mono/stereo, other rates 48 kHz.
+_AAC_LAYOUTS = frozenset({"mono", "stereo", "2.1", "3.0", "4.0", "5.0", "5.1", "6.1", "7.1"})
+_AAC_SAMPLE_RATES = frozenset(
+    {96000, 88200, 64000, 48000, 44100, 32000, 24000, 22050, 16000, 12000, 11025, 8000, 7350}
+)
+
+_AV_ERRORS = (av.error.FFmpegError, OSError)
+
+
+@dataclass(frozen=True)
+class VideoInfo:
+    """What probe_video learns from the container header and the first decoded frame."""
+
+    path: Path
+    width: int  # display width, after rotation
+    height: int  # display height, after rotation
+    fps: Fraction  # average frame rate, see _frame_rate
+    # From the container's index (MP4/MOV sample table, AVI index): exact for well-formed files.
+    # Containers without a count (MKV, MPEG-TS) give round(duration_s * fps), an estimate:
+    # call count_frames for the exact number.
+    frame_count: int
+    duration_s: float
+    rotation: int  # degrees clockwise to turn the stored frames for display: 0, 90, 180 or 270
+    has_audio: bool
+    codec: str
+    time_base: Fraction  # of the video stream; Frame.pts counts in it
+
+
+@dataclass(frozen=True)
+class Frame:
+    index: int  # 0-based decode order after dropping undecodable frames
+    pts: int | None  # presentation timestamp in the stream's time_base
+    time_s: float  # seconds since the stream's start_time (absolute time is pts * time_base)
+    rgb: np.ndarray  # (H, W, 3) uint8, rotation already applied
+
+
+def _reason(error: BaseException) -> str:
+    """FFmpeg's reason without the errno and path PyAV adds, on one line."""
+    text = getattr(error, "strerror", None) or str(error) or type(error).__name__
+    return " ".join(str(text).split())
+
+
+def _checked_input_path(path: str | os.PathLike[str]) -> Path:
+    """Fail early, with a plain message, on the cases FFmpeg would only call 'invalid data'."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"input file not found: {path}")
+    if path.is_dir():
+        raise InputError(f"input is a directory, not a video file: {path}")
+    if not path.is_file():
+        raise InputError(f"input is not a regular file: {path}")
+    if not os.access(path, os.R_OK):
+        raise InputError(f"input file is not readable (permission denied): {path}")
+    if path.stat().st_size == 0:
+        raise InputError(f"input file is empty: {path}")
+    return path
+
+
+def _open_input(path: Path) -> av.container.InputContainer:
+    try:
+        container = av.open(str(path), "r")
+    except av.error.InvalidDataError:
+        raise InputError(f"not a video file (FFmpeg cannot recognise its format): {path}") from None
+    except _AV_ERRORS as error:
+        raise InputError(f"cannot open {path}: {_reason(error)}") from None
+    # FFmpeg's "tty" demuxer turns any text file into an ANSI-art video stream.
+    if container.format.name == "tty":
+        container.close()
+        raise InputError(f"not a video file (looks like text): {path}")
+    return container
+
+
+def _video_stream(container: av.container.InputContainer, path: Path) -> av.VideoStream:
+    # Cover art in audio files shows up as a one-picture video stream; it is not a video.
+    for stream in container.streams.video:
+        if not stream.disposition & av.stream.Disposition.attached_pic:
+            return stream
+    raise InputError(f"no video stream in {path}")
+
+
+def _frame_rate(stream: av.VideoStream, path: Path) -> Fraction:
+    """The average rate, snapped to FFmpeg's guessed rate (mostly r_frame_rate) within 1%.
+
+    MP4 reports the average over a duration that leaves out the last frame's (245 frames at
+    25 fps read as 6125/244); the guessed rate is the exact 25 then. For a VFR file the guess
+    can be far off, which is why it is used only when the two agree.
+    """
+    average, base = stream.average_rate, stream.guessed_rate
+    if average and base and abs(float(average / base) - 1.0) < 0.01:
+        return Fraction(base)
+    rate = average or base
+    if not rate or rate <= 0:
+        raise InputError(f"video stream has no frame rate: {path}")
+    return Fraction(rate)
+
+
+def _clockwise(ccw_degrees: float) -> int:
+    """FFmpeg's display-matrix angle (counterclockwise) as a clockwise quarter turn."""
+    return int(round(-ccw_degrees / 90.0)) % 4 * 90
+
+
+def _upright(rgb: np.ndarray, rotation: int) -> np.ndarray:
+    if rotation == 0:
+        return rgb
+    # np.rot90 turns counterclockwise for positive k; contiguous so OpenCV accepts it.
+    return np.ascontiguousarray(np.rot90(rgb, k=-rotation // 90))
+
+
+def _decoded_frames(
+    container: av.container.InputContainer, stream: av.VideoStream, warnings: list[str], path: Path
+) -> Iterator[av.VideoFrame]:
+    """Decoded frames in order, skipping (with a warning) what FFmpeg cannot decode."""
+    demuxed = container.demux(stream)
+    while True:
+        try:
+            packet = next(demuxed)
+        except StopIteration:
+            return
+        except _AV_ERRORS as error:
+            # A broken container cannot be resynced reliably: keep what decoded so far.
+            warnings.append(f"{path.name}: stopped reading at a container error: {_reason(error)}")
+            packet = None
+        try:
+            frames = stream.decode(packet)  # None or the final empty packet flushes the decoder
+        except _AV_ERRORS as error:
+            where = f"pts {packet.pts}" if packet is not None else "the end"
+            warnings.append(f"{path.name}: skipped an undecodable packet at {where}: {_reason(error)}")
+            frames = []
+        for frame in frames:
+            if frame.is_corrupt:
+                warnings.append(f"{path.name}: skipped a corrupt frame (pts {frame.pts})")
+                continue
+            yield frame
+        if packet is None:
+            return
+
+
+def probe_video(path: str | os.PathLike[str]) -> VideoInfo:
+    """Read the header and decode the first frame (for rotation, and to prove it decodes)."""
+    path = _checked_input_path(path)
+    with _open_input(path) as container:
+        stream = _video_stream(container, path)
+        fps = _frame_rate(stream, path)
+        time_base = stream.time_base
+        if stream.duration is not None and time_base:
+            duration_s = float(stream.duration * time_base)
+        elif container.duration is not None:
+            duration_s = container.duration / av.time_base
+        else:
+            duration_s = 0.0
+        frame_count = stream.frames or round(duration_s * fps)
+        first = next(_decoded_frames(container, stream, [], path), None)
+        if first is None:
+            raise InputError(f"no decodable video frame in {path}")
+        rotation = _clockwise(first.rotation)
+        width, height = first.width, first.height
+        if rotation in (90, 270):
+            width, height = height, width
+        return VideoInfo(
+            path=path,
+            width=width,
+            height=height,
+            fps=fps,
+            frame_count=int(frame_count),
+            duration_s=duration_s,
+            rotation=rotation,
+            has_audio=bool(container.streams.audio),
+            codec=stream.codec_context.name,
+            time_base=Fraction(time_base) if time_base else Fraction(1, 1) / fps,
+        )
+
+
+def count_frames(path: str | os.PathLike[str]) -> int:
+    """The exact number of frames VideoReader yields, from the packets (no decoding) when it can.
+
+    One packet is one frame for every container this project meets (checked on all the shared
+    clips). Decoding is the fallback when the packets cannot be read to the end, or when some
+    are flagged corrupt, since the reader drops what does not decode.
+    """
+    path = _checked_input_path(path)
+    with _open_input(path) as container:
+        stream = _video_stream(container, path)
+        count = 0
+        try:
+            for packet in container.demux(stream):
+                if packet.is_corrupt:
+                    count = 0
+                    break
+                # Empty packets are end-of-stream flushes; discard-flagged ones are cut by an edit list.
+                if packet.size and not packet.is_discard:
+                    count += 1
+        except _AV_ERRORS:
+            count = 0
+    if count:
+        return count
+    with VideoReader(path) as reader:
+        return sum(1 for _ in reader.decoded_frames())
+
+
+class VideoReader:
+    """Streams a video as upright RGB Frames, one at a time. Single pass; use as a context manager.
+
+    Undecodable packets and corrupt frames are skipped; each skip adds a line to `warnings`.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.info: VideoInfo = probe_video(path)
+        self.warnings: list[str] = []
+        self._container = _open_input(self.info.path)
+        self._stream = _video_stream(self._container, self.info.path)
+        self._stream.codec_context.thread_type = "AUTO"  # frame + slice threads: much faster on 720p
+        self._started = False
+
+    def decoded_frames(self) -> Iterator[av.VideoFrame]:
+        """The raw PyAV frames, before RGB conversion and rotation."""
+        if self._started:
+            raise RuntimeError("VideoReader reads once; open a new one to read again")
+        self._started = True
+        return _decoded_frames(self._container, self._stream, self.warnings, self.info.path)
+
+    def __iter__(self) -> Iterator[Frame]:
+        info = self.info
+        # Stored (pre-rotation) size: a mid-stream size change is scaled back to it.
+        stored_w, stored_h = info.width, info.height
+        if info.rotation in (90, 270):
+            stored_w, stored_h = stored_h, stored_w
+        start = self._stream.start_time or 0
+        for index, frame in enumerate(self.decoded_frames()):
+            pts = frame.pts if frame.pts is not None else frame.dts
+            time_s = float((pts - start) * info.time_base) if pts is not None else float(index / info.fps)
+            # rgb24 covers grayscale and 10-bit sources; honour a full-range tag on plain yuv.
+            rgb = frame.to_ndarray(
+                format="rgb24", width=stored_w, height=stored_h, src_color_range=frame.color_range or None
+            )
+            yield Frame(index=index, pts=pts, time_s=time_s, rgb=_upright(rgb, info.rotation))
+
+    def close(self) -> None:
+        self._container.close()
+
+    def __enter__(self) -> VideoReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def _check_output_format(output: Path) -> str:
+    fmt = OUTPUT_FORMATS.get(output.suffix.lower())
+    if fmt is None:
+        supported = ", ".join(OUTPUT_FORMATS)
+        raise OutputError(f"unsupported output type '{output.suffix}' for {output}: use one of {supported}")
+    return fmt
+
+
+def _check_output_folder(output: Path) -> None:
+    parent = output.parent
+    if not parent.is_dir():
+        raise OutputError(f"output folder does not exist: {parent}")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"output folder is not writable: {parent}")
+
+
+def check_output_path(output: Path, input: Path, *, overwrite: bool) -> None:
+    """Refuse an output path before any work is done on it."""
+    output, input = Path(output), Path(input)
+    if _same_file(output, input):
+        raise OutputError(f"output is the same file as the input: {output}")
+    _check_output_format(output)
+    if output.is_dir():
+        raise OutputError(f"output is a directory: {output}")
+    if output.exists() and not overwrite:
+        raise OutputError(f"output already exists: {output} (pass --overwrite to replace it)")
+    _check_output_folder(output)
+
+
+def _reserve_temp_path(target: Path) -> Path:
+    """An unused hidden name beside the target, so the final os.replace is atomic (same filesystem)."""
+    while True:
+        temp = target.with_name(f".{target.stem}.ffviz-tmp-{secrets.token_hex(4)}{target.suffix}")
+        try:
+            # Created here rather than by mkstemp so the final file gets normal (umask) permissions.
+            os.close(os.open(temp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666))
+            return temp
+        except FileExistsError:
+            continue
+        except OSError as error:
+            raise OutputError(f"cannot create a file in {target.parent}: {_reason(error)}") from None
+
+
+class _AudioPassthrough:
+    """Feeds the audio of `source` into `output`, copied when the codec allows, else as AAC.
+
+    Packets are read lazily and muxed up to the time of the latest video frame, so memory stays
+    bounded; FFmpeg's interleaver absorbs the encoder's lookahead delay.
+    """
+
+    def __init__(self, source: Path, output: av.container.OutputContainer, warnings: list[str]) -> None:
+        self._source_path = source
+        self._warnings = warnings
+        self._container = _open_input(_checked_input_path(source))
+        self._output = output
+        self._in = self._container.streams.audio[0] if self._container.streams.audio else None
+        self._pending: av.Packet | None = None
+        self._next_sample: int | None = None  # transcoding: pts of the next sample
+        self._done = self._in is None
+        self.copied = False
+        if self._in is None:
+            return
+        codec = self._in.codec_context.codec.canonical_name
+        self.copied = codec in COPYABLE_AUDIO_CODECS[output.format.name]
+        if self.copied:
+            self._out = output.add_stream_from_template(self._in)
+        else:
+            in_ctx = self._in.codec_context
+            rate = in_ctx.sample_rate if in_ctx.sample_rate in _AAC_SAMPLE_RATES else 48000
+            layout = in_ctx.layout.name
+            if layout not in _AAC_LAYOUTS:  # e.g. "1 channels" (PCM in MKV), which the encoder refuses
+                layout = "mono" if in_ctx.channels == 1 else "stereo"
+            self._out = output.add_stream("aac", rate=rate, layout=layout)
+        self._packets = self._container.demux(self._in)
+
+    def _next_packet(self) -> av.Packet | None:
+        try:
+            return next(self._packets)
+        except StopIteration:
+            return None
+        except _AV_ERRORS as error:
+            self._warnings.append(f"{self._source_path.name}: audio stopped early: {_reason(error)}")
+            return None
+
+    def mux_until(self, time_s: float | None) -> None:
+        """Mux audio up to time_s seconds (everything left when None)."""
+        while not self._done:
+            packet = self._pending or self._next_packet()
+            self._pending = None
+            if packet is None:
+                self._done = True
+                if not self.copied:
+                    self._mux_encoded(None)
+                return
+            if packet.dts is None and packet.pts is None:
+                if not self.copied:  # the final empty packet flushes the decoder
+                    self._transcode(packet)
+                continue
+            stamp = packet.pts if packet.pts is not None else packet.dts
+            if time_s is not None and stamp * packet.time_base > time_s:
+                self._pending = packet
+                return
+            if self.copied:
+                packet.stream = self._out
+                self._output.mux(packet)
+            else:
+                self._transcode(packet)
+
+    def _transcode(self, packet: av.Packet) -> None:
+        try:
+            frames = self._in.decode(packet)
+        except _AV_ERRORS as error:
+            self._warnings.append(f"{self._source_path.name}: skipped undecodable audio: {_reason(error)}")
+            return
+        for frame in frames:
+            # Stamp by sample count: a millisecond time base (MKV) would jitter AAC's timestamps.
+            if self._next_sample is None:
+                start = frame.pts * frame.time_base if frame.pts is not None else 0
+                self._next_sample = round(start * frame.sample_rate)
+            frame.pts, frame.time_base = self._next_sample, Fraction(1, frame.sample_rate)
+            self._next_sample += frame.samples
+            self._mux_encoded(frame)
+
+    def _mux_encoded(self, frame: av.AudioFrame | None) -> None:
+        for packet in self._out.encode(frame):
+            self._output.mux(packet)
+
+    def close(self) -> None:
+        self._container.close()
+
+
+class VideoWriter:
+    """Writes RGB frames as H.264 (libx264, yuv420p) with the input's timestamps, atomically.
+
+    Output goes to a hidden temp file beside `path`; close() moves it onto `path`, abort() (and an
+    exception inside the `with` block) deletes it, so a failed run leaves no file behind.
+    Frames are written upright with no rotation tag, since VideoReader already applied rotation.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        like: VideoInfo,
+        width: int | None = None,
+        height: int | None = None,
+        audio_from: Path | None = None,
+        crf: int = 18,
+        preset: str = "medium",
+    ) -> None:
+        self.path = Path(path)
+        self.warnings: list[str] = []
+        self.width = width or like.width
+        self.height = height or like.height
+        self._time_base = like.time_base
+        # Default spacing when write() gets no timestamp: one frame at the input's rate.
+        self._frame_ticks = max(1, round(1 / (like.fps * like.time_base)))
+        self._last_pts: int | None = None
+        self._temp: Path | None = None
+        self._container: av.container.OutputContainer | None = None
+        self._audio: _AudioPassthrough | None = None
+
+        fmt = _check_output_format(self.path)
+        for source in (like.path, audio_from):
+            if source is not None and _same_file(self.path, Path(source)):
+                raise OutputError(f"output is the same file as the input: {self.path}")
+        _check_output_folder(self.path)
+
+        self._temp = _reserve_temp_path(self.path)
+        try:
+            options = {}
+            if fmt in ("mp4", "mov"):
+                # faststart: index at the front, so the file plays before it has fully loaded.
+                # movie_timescale: the edit list delaying a stream that starts after 0 is counted in
+                # it; the default 1/1000 s would shift every frame of e.g. a 30000/1001 time base.
+                options = {"movflags": "+faststart"}
+                if like.time_base.denominator < 2**31:
+                    options["movie_timescale"] = str(like.time_base.denominator)
+            self._container = av.open(str(self._temp), "w", format=fmt, options=options)
+            self._video = self._add_video_stream(like.fps, crf, preset)
+            if audio_from is not None:
+                self._audio = _AudioPassthrough(Path(audio_from), self._container, self.warnings)
+        except InputError:
+            self.abort()
+            raise
+        except _AV_ERRORS as error:
+            self.abort()
+            raise OutputError(f"cannot start writing {self.path}: {_reason(error)}") from None
+
+    def _add_video_stream(self, fps: Fraction, crf: int, preset: str) -> av.VideoStream:
+        stream = self._container.add_stream("libx264", rate=fps, options={"crf": str(crf), "preset": preset})
+        # yuv420p halves chroma, so H.264 needs even sizes (its crop step is 2 pixels too). An odd
+        # side is padded by one replicated edge pixel: the output is at most 1 px wider/taller,
+        # which beats yuv444p (High 4:4:4 profile, which many players refuse).
+        stream.width = self.width + self.width % 2
+        stream.height = self.height + self.height % 2
+        stream.pix_fmt = "yuv420p"
+        # Input time base in, so input pts go through unchanged (the MP4 muxer may refine the
+        # track's time base after the header; PyAV rescales packets to it exactly).
+        stream.time_base = self._time_base
+        stream.codec_context.time_base = self._time_base
+        # PyAV converts RGB with the BT.601 matrix into limited range; say so, so players agree.
+        stream.codec_context.colorspace = 6  # AVCOL_SPC_SMPTE170M (BT.601)
+        stream.codec_context.color_range = 1  # AVCOL_RANGE_MPEG (limited)
+        return stream
+
+    def write(self, rgb: np.ndarray, *, pts: int | None = None, time_s: float | None = None) -> None:
+        """Encode one frame. pts is in the input's time_base (keeps VFR timing and A/V sync exactly);
+        else time_s seconds; else one frame after the previous one."""
+        if self._container is None:
+            raise RuntimeError(f"VideoWriter for {self.path} is already closed")
+        if rgb.dtype != np.uint8 or rgb.shape != (self.height, self.width, 3):
+            expected = (self.height, self.width, 3)
+            raise ValueError(f"expected a uint8 frame of shape {expected}, got {rgb.dtype} {rgb.shape}")
+        if pts is None:
+            if time_s is not None:
+                pts = round(time_s / self._time_base)
+            else:
+                pts = 0 if self._last_pts is None else self._last_pts + self._frame_ticks
+        if self._last_pts is not None and pts <= self._last_pts:
+            # x264 and the muxer need strictly increasing timestamps; nudge rather than fail.
+            self.warnings.append(f"pts {pts} is not after {self._last_pts}; wrote it at {self._last_pts + 1}")
+            pts = self._last_pts + 1
+        self._last_pts = pts
+        if self.width % 2 or self.height % 2:
+            rgb = np.pad(rgb, ((0, self.height % 2), (0, self.width % 2), (0, 0)), mode="edge")
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+        frame.pts = pts
+        frame.time_base = self._time_base
+        try:
+            for packet in self._video.encode(frame):
+                self._container.mux(packet)
+            if self._audio is not None:
+                self._audio.mux_until(float(pts * self._time_base))
+        except _AV_ERRORS as error:
+            self.abort()
+            raise OutputError(f"cannot write {self.path}: {_reason(error)}") from None
+
+    def close(self) -> None:
+        """Flush the encoder, mux the rest of the audio, and move the file into place."""
+        if self._container is None:
+            return
+        try:
+            for packet in self._video.encode(None):
+                self._container.mux(packet)
+            if self._audio is not None:
+                self._audio.mux_until(None)
+                self._audio.close()
+                self._audio = None
+            self._container.close()
+            self._container = None
+            os.replace(self._temp, self.path)
+            self._temp = None
+        except _AV_ERRORS as error:
+            self.abort()
+            raise OutputError(f"cannot finish writing {self.path}: {_reason(error)}") from None
+        except BaseException:  # e.g. Ctrl-C during the flush: still leave no temp file
+            self.abort()
+            raise
+
+    def abort(self) -> None:
+        """Stop and delete the temp file; the target path is left as it was."""
+        for closeable in (self._audio, self._container):
+            if closeable is not None:
+                try:
+                    closeable.close()
+                except _AV_ERRORS:
+                    pass  # already failing; the temp file is deleted below anyway
+        self._audio = None
+        self._container = None
+        if self._temp is not None:
+            self._temp.unlink(missing_ok=True)
+            self._temp = None
+
+    def __enter__(self) -> VideoWriter:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()

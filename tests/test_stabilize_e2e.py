@@ -1,0 +1,176 @@
+"""End to end: the CLI and the library on synthetic ground truth and on the real clips."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from fractions import Fraction
+
+import av
+import numpy as np
+import pytest
+
+from conftest import real_clip
+from ffviz import cli, entities as ent
+from ffviz.recorder import RerunRecorder
+from ffviz.rrd import Recording
+from pipeline import geometry, synthetic, video_io
+from pipeline.observer import Observers, StageCollector
+from pipeline.stabilize import StabilizeConfig, stabilize
+
+
+@pytest.fixture(scope="module")
+def shaky(tmp_path_factory):
+    """A small synthetic shaky clip with its ground truth."""
+    # Half the default size, so half the default blur length (6 px at 320x180 = 12 px at 640x360).
+    config = synthetic.SyntheticConfig(width=320, height=180, n_frames=48, seed=3, jitter_px=4.0, blur_length_px=6.0)
+    video = synthetic.generate(config)
+    path = tmp_path_factory.mktemp("synthetic") / "shaky.mp4"
+    synthetic.write_video(video, path)
+    return path, video
+
+
+def frame_stats(path):
+    info = video_io.probe_video(path)
+    with video_io.VideoReader(path) as reader:
+        frames = [f.rgb for f in reader]
+    return info, frames
+
+
+@pytest.mark.parametrize("mode", ["none", "crop"])
+def test_cli_stabilize_keeps_count_rate_size_and_fills_or_crops_borders(shaky, tmp_path, mode):
+    path, video = shaky
+    out = tmp_path / f"out_{mode}.mp4"
+    assert cli.main(["stabilize", str(path), "-o", str(out), "--mode", mode]) == 0
+    info_in = video_io.probe_video(path)
+    info, frames = frame_stats(out)
+    assert len(frames) == video.n_frames
+    assert (info.width, info.height) == (info_in.width, info_in.height)
+    assert info.fps == info_in.fps
+    black = np.mean([np.mean(np.all(f < 8, axis=2)) for f in frames])
+    if mode == "none":
+        assert black > 0.005  # the stabilizing warp uncovers borders, left black
+    else:
+        assert black < 0.001  # cropped: no border left
+
+
+def test_estimated_motion_and_smoothed_path_match_the_ground_truth(shaky):
+    path, video = shaky
+    collector = StageCollector("motion", "smoothing")
+    stabilize(path, None, StabilizeConfig(mode="none"), observer=collector)
+    w, h = video.size
+    errors = {s.index: geometry.corner_error(e.curr_from_prev, video.curr_from_prev[s.index], w, h)
+              for s, e in collector.results["motion"] if s.index > 0}
+    sharp = [err for t, err in errors.items() if not (video.is_blurred(t) or video.is_blurred(t - 1))]
+    blurred = [err for t, err in errors.items() if video.is_blurred(t) or video.is_blurred(t - 1)]
+    # Through H.264 coding and with a moving object; pairs with a motion-blurred frame are looser.
+    assert np.median(sharp) < 0.2 and max(sharp) < 0.6
+    assert np.median(blurred) < 1.0 and max(blurred) < 3.0
+    # The stabilized camera path sheds the jitter: compare the x path's frame-to-frame acceleration.
+    (_, smoothing_result), = collector.results["smoothing"]
+    accel = lambda x: np.sqrt(np.mean(np.diff(x, 2) ** 2))
+    assert accel(smoothing_result.smoothed_trajectory[:, 0]) < 0.35 * accel(smoothing_result.original_trajectory[:, 0])
+
+
+def test_recording_reads_back_with_the_pipelines_values(shaky, tmp_path):
+    path, video = shaky
+    rrd = tmp_path / "run.rrd"
+    collector = StageCollector("motion", "smoothing")
+    recorder = RerunRecorder(rrd, level="full")
+    stabilize(path, tmp_path / "o.mp4", StabilizeConfig(mode="none"), observer=Observers(recorder, collector))
+    recording = Recording.load(rrd)
+    (_, result), = collector.results["smoothing"]
+    for root, truth in ((ent.TRAJECTORY_ORIGINAL, result.original_trajectory),
+                        (ent.TRAJECTORY_SMOOTHED, result.smoothed_trajectory)):
+        for column, axis in enumerate(ent.TRAJECTORY_AXES):
+            frames, values = recording.scalars(f"{root}/{axis}")
+            np.testing.assert_array_equal(frames, np.arange(video.n_frames))
+            np.testing.assert_allclose(values, truth[:, column], rtol=0, atol=1e-9)
+    # Per-frame parameters equal the estimates that were logged.
+    frames, dx = recording.scalars(f"{ent.MOTION_PARAMS}/dx")
+    expected = [geometry.decompose(e.curr_from_prev, *video.size)[0] for _, e in collector.results["motion"]]
+    np.testing.assert_allclose(dx, expected, atol=1e-9)
+    for entity in (ent.INPUT_FRAME, ent.STABILIZED_FRAME, ent.STABILIZED_MISSING, ent.OUTPUT_FRAME):
+        assert recording.rows(entity) == video.n_frames, entity
+        assert recording.timelines(entity) == {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}
+    assert "rerun-sdk" in recording.texts(ent.META, "TextDocument:text")[0]
+
+
+def test_summary_recording_has_series_and_output_but_no_intermediate_frames(shaky, tmp_path):
+    path, video = shaky
+    rrd = tmp_path / "summary.rrd"
+    stabilize(path, None, StabilizeConfig(), observer=RerunRecorder(rrd, level="summary"))
+    recording = Recording.load(rrd)
+    assert recording.rows(ent.OUTPUT_FRAME) == video.n_frames
+    assert recording.rows(f"{ent.TRAJECTORY_SMOOTHED}/x") == video.n_frames
+    assert recording.rows(ent.INPUT_FRAME) == 0 and recording.rows(ent.STABILIZED_FRAME) == 0
+
+
+def test_cli_errors_are_one_line_and_non_zero(shaky, tmp_path, capsys):
+    path, _ = shaky
+    assert cli.main(["stabilize", str(tmp_path / "missing.mp4"), "-o", str(tmp_path / "o.mp4")]) != 0
+    assert cli.main(["stabilize", str(path), "-o", str(path)]) != 0
+    assert cli.main(["stabilize", str(path), "-o", str(tmp_path / "o.mp4"), "-k", "-3"]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(line.startswith("ffviz: error:") for line in err)
+    assert not (tmp_path / "o.mp4").exists()
+    assert path.stat().st_size > 0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_view_serves_the_web_viewer_on_localhost(shaky, tmp_path):
+    path, _ = shaky
+    rrd = tmp_path / "v.rrd"
+    stabilize(path, None, StabilizeConfig(), observer=RerunRecorder(rrd, level="summary"))
+    web, grpc = free_port(), free_port()
+    process = subprocess.Popen([sys.executable, "-m", "ffviz.cli", "view", str(rrd), "--web-port", str(web),
+                                "--grpc-port", str(grpc)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        first_line = process.stdout.readline()
+        assert f"http://127.0.0.1:{web}/" in first_line
+        deadline = time.time() + 30
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=2) as response:
+                    assert response.status == 200
+                    break
+            except OSError:
+                if time.time() > deadline:
+                    raise
+                time.sleep(0.5)
+    finally:
+        process.terminate()
+        process.wait(timeout=20)
+
+
+def test_view_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
+    bogus = tmp_path / "x.rrd"
+    bogus.write_text("hello")
+    assert cli.main(["view", str(bogus)]) != 0
+    assert "not a Rerun recording" in capsys.readouterr().err
+
+
+@pytest.mark.real_video
+@pytest.mark.parametrize("clip", ["sudheerachary_small-shaky-5.avi", "linyihaolyh_shaky.mp4"])
+@pytest.mark.parametrize("mode", ["none", "crop"])
+def test_real_clips_keep_frame_count_fps_size_and_audio(clip, mode, tmp_path):
+    source = real_clip(clip)
+    out = tmp_path / "out.mp4"
+    assert cli.main(["stabilize", str(source), "-o", str(out), "--mode", mode]) == 0
+    info_in, info_out = video_io.probe_video(source), video_io.probe_video(out)
+    assert video_io.count_frames(out) == video_io.count_frames(source)
+    assert (info_out.width, info_out.height) == (info_in.width, info_in.height)
+    assert abs(float(info_out.fps) - float(info_in.fps)) < 1e-3
+    assert info_out.has_audio == info_in.has_audio
+    if info_in.has_audio:
+        with av.open(str(out)) as container:
+            audio = container.streams.audio[0]
+            assert audio.duration is None or float(audio.duration * audio.time_base) > 0.9 * info_in.duration_s
