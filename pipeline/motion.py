@@ -31,12 +31,12 @@ class MotionConfig:
     model: MotionModel = "affine"
     refine: Refinement = "none"
     max_side: int = 960  # estimation runs on frames downscaled to this longest side
-    max_corners: int = 1000
+    max_corners: int = 600
     corner_quality: float = 0.003
     corner_min_distance: int = 8
     corner_grid: tuple[int, int] = (8, 5)  # corners are detected per cell (columns, rows), see _detect_corners
-    lk_window: int = 21
-    lk_levels: int = 4
+    lk_window: int = 15
+    lk_levels: int = 3
     lk_passes: int = 2  # later passes track against curr warped back by the estimate so far (removes LK's bias)
     fb_max_error_px: float = 1.0  # forward-backward tracking error beyond which a track is dropped
     ransac_threshold_px: float = 1.5
@@ -151,8 +151,9 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
     if len(corners) < config.min_inliers:
         return _WorkEstimate(geometry.IDENTITY.copy(), f"featureless frame ({len(corners)} corners)")
 
+    # Pass 1 only needs to land within a pixel (RANSAC and pass 2 do the rest): loose, cheap termination.
     lk = dict(winSize=(config.lk_window, config.lk_window), maxLevel=config.lk_levels,
-              criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 40, 0.001))
+              criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03))
     corners = corners.reshape(-1, 2)
     curr_from_prev = geometry.IDENTITY.copy()
     result = _WorkEstimate(curr_from_prev, "no tracking pass ran")
@@ -160,11 +161,13 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
         if lk_pass == 0:
             prev_pts, curr_pts = _track(prev_gray, curr_gray, corners, lk, config.fb_max_error_px)
         else:
-            # Track pass-1 inliers against curr brought back into prev's frame: what LK sees is only the
-            # residual motion (a pixel or less), so one pyramid level and no backward check suffice.
+            # Track again against curr brought back into prev's frame: what LK sees is only the residual
+            # motion (a pixel or so), so one pyramid level and no backward check suffice. All tracks take
+            # part, and RANSAC runs tighter, so a compromise fit of pass 1 is not locked in.
             target = _warp_gray(curr_gray, curr_from_prev)
-            refine_lk = dict(lk, maxLevel=1)
-            prev_pts, target_pts = _track(prev_gray, target, result.prev_points[result.inliers], refine_lk, None)
+            refine_lk = dict(winSize=(21, 21), maxLevel=1,
+                             criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.001))
+            prev_pts, target_pts = _track(prev_gray, target, result.prev_points, refine_lk, None)
             curr_pts = geometry.apply(curr_from_prev, target_pts).astype(np.float32)
         if len(prev_pts) < config.min_inliers:
             if lk_pass > 0:
@@ -172,7 +175,7 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
             return _WorkEstimate(geometry.IDENTITY.copy(), f"too few tracked features ({len(prev_pts)})",
                                  n_tracked=len(prev_pts), prev_points=prev_pts, curr_points=curr_pts,
                                  inliers=np.zeros(len(prev_pts), bool))
-        matrix, inlier_mask = _fit_model(prev_pts, curr_pts, config)
+        matrix, inlier_mask = _fit_model(prev_pts, curr_pts, config, tight=lk_pass > 0)
         inliers = np.zeros(len(prev_pts), bool) if inlier_mask is None else inlier_mask.ravel().astype(bool)
         n_tracked = len(prev_pts) if lk_pass == 0 else result.n_tracked
         result = _WorkEstimate(curr_from_prev, None, n_tracked=n_tracked, n_inliers=int(inliers.sum()),
@@ -237,8 +240,8 @@ def _warp_gray(curr_gray: np.ndarray, curr_from_prev: np.ndarray) -> np.ndarray:
     return cv2.warpPerspective(curr_gray, curr_from_prev, (width, height), flags=flags, borderMode=cv2.BORDER_REPLICATE)
 
 
-def _fit_model(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig):
-    threshold = config.ransac_threshold_px
+def _fit_model(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig, *, tight: bool = False):
+    threshold = config.ransac_threshold_px * (0.5 if tight else 1.0)
     if config.model == "homography":
         return cv2.findHomography(prev_pts, curr_pts, cv2.RANSAC, threshold, maxIters=2000, confidence=0.995)
     fit = cv2.estimateAffine2D if config.model == "affine" else cv2.estimateAffinePartial2D
