@@ -1,0 +1,596 @@
+"""Objective stabilization measures: Liu et al. 2013 as the common evaluation scripts compute them, plus ours.
+
+Liu, Yuan, Tan, Sun, "Bundled camera paths for video stabilization", SIGGRAPH 2013, defined three
+measures; later papers compute them with variants of one script, published with DIFRINT
+(github.com/jinsc37/DIFRINT, ``metrics.py``; the reference followed here) and copied into later
+evaluation code (a ``StabEval`` class with the same SURF/FFT code; a variant that resizes frames to
+640x480, caches SIFT features and filters distortion to [0.5, 1]). This module follows that script,
+with the deviations listed below, and adds a jitter measure in pixels that works on a single video.
+Everything is written from the definitions; no code is copied.
+
+Feature matching (every pair of frames below)
+---------------------------------------------
+Each frame is converted to grey and downscaled so its longer side is at most ``max_side``
+(INTER_AREA). SIFT (``cv2.SIFT_create(n_features)``; ORB with ``feature="orb"``, or when SIFT is
+missing) runs once per frame; its keypoints are reused for every pair the frame takes part in.
+Descriptors are matched by brute force, k=2, and kept by Lowe's ratio test (``ratio``, 0.75; the
+script uses 0.7). With more than ``min_matches`` (10, as the script) survivors a homography is fitted
+by RANSAC (``ransac_px`` pixels of the downscaled image, 3.0; the script uses 5.0 at 640x480), then
+expressed in full-resolution pixels. A pair *fails* (no homography) when there are too few matches,
+fewer than 8 RANSAC inliers, or the fit is degenerate (non-finite, or det of its 2x2 part <= 0).
+A pair of *neighbouring* frames of one video also fails when the step is implausible as camera
+motion (a scene cut matched to something bogus): rotation over 30 degrees, scale change beyond
+1.5x either way (sqrt of the singular values' product), or singular-value ratio below 0.7. Input-
+output pairs have no such gate (the scripts have none), so a distorting output is not hidden.
+
+SIFT in OpenCV doubles its input before building the scale space, so a 320-pixel image is analysed
+on a 640-pixel base: ``max_side=320`` (the default) keeps sub-pixel accuracy (on real 640x360
+frames warped by known transforms: about 0.12 px of full-resolution error, against 0.06 px when
+detecting at 640) at a quarter of the detection cost.
+
+Per-frame measures (``compare``: input frame i against output frame i)
+----------------------------------------------------------------------
+``H_i`` maps input pixels to output pixels (``x_out ~ H_i x_in``, findHomography(src=input,
+dst=output) as in the script). With ``A_i = H_i[:2, :2]`` (H normalised so ``H[2,2] = 1``):
+
+* scale ``s_i = sqrt(|det A_i|)``; **cropping** ``c_i = min(1, 1 / s_i)``. An output that shows the
+  input zoomed in by 1.25 (a 20 % crop each way) gives ``c_i = 0.8``. ``cropping_ratio`` is the mean
+  of ``c_i`` over frames whose pair did not fail. The script uses ``sqrt(H00 * H11)``, which equals
+  ``s_i`` without rotation or shear but falls with rotation (cos^2); the determinant does not.
+  Each frame's value is computed once: the DIFRINT script re-inverts its whole running sequence every
+  frame (``CR_seq = concatenate((1/CR_seq, [s]))``), which flips the earlier values; we do not.
+* **distortion** ``d_i = sigma_min(A_i) / sigma_max(A_i)`` (singular values; 1 = no anisotropic
+  scale or shear). The script takes the ratio of the eigenvalues of ``A_i``, which are complex under
+  rotation; singular values are the robust equivalent. ``distortion`` = min over frames (the worst,
+  as the script reports), ``distortion_mean`` = mean. No outlier filtering (some scripts drop
+  ``d_i`` outside [0.5, 1]).
+* **black_fraction**: fraction of output pixels whose R, G and B are all ``<= black_level`` (7, i.e.
+  below 8) and that belong to a 4-connected region of such pixels touching the image border (so dark
+  content inside the picture is not counted), averaged over all output frames. Level 7 rather than
+  3 because H.264 (yuv420p) blurs the edge of a black border: on a 640x360 test with 10.8 % black,
+  CRF 18 read 10.1 % at level 3 and 10.5 % at level 7; dark real clips read <= 0.02 % at level 7.
+
+Stability score (one video; ``compare`` reports the output's, ``input`` holds the input's)
+------------------------------------------------------------------------------------------
+``M_t`` (t = 1..N-1) maps frame t-1 to frame t (identity when the pair fails). The path is
+accumulated as ``P_t = M_t @ P_{t-1}``, ``P_0 = I`` (frame 0 to frame t; the script multiplies on
+the right, which is the same for translations only), each normalised so ``P[2,2] = 1``. From
+``P_1 .. P_{N-1}`` (N-1 samples, as the script) two 1-D signals are taken:
+
+* translation ``T_t = sqrt(P_t[0,2]^2 + P_t[1,2]^2)`` pixels: the magnitude, as the script does
+  (not x and y separately);
+* rotation ``R_t = atan2(P_t[1,0], P_t[0,0])`` in degrees, unwrapped. The script uses
+  ``atan2(P00, P11)``, which is 45 degrees for any rotation and uniform scale (a bug); we use the
+  rotation angle of the path.
+
+For each signal x of length K: ``E = |FFT(x)|^2``; drop the DC bin; keep the first ``(K-1)//2``
+remaining bins (frequencies 1 .. (K-1)//2); score = energy of the first five kept bins (frequencies
+1..5) / energy of all kept bins. A constant signal (no energy) scores 1. ``stability_translation``
+and ``stability_rotation`` are reported separately (the script prints them and their mean).
+Beware: a perfectly still output shows only the estimation noise, which is white, and scores low.
+
+Residual jitter (ours; one video)
+---------------------------------
+From the same ``M_t``: the centre ``c`` of the frame moves by ``d_t = M_t(c) - c`` (pixels,
+perspective divide included) and the frame turns by ``a_t = atan2(M_t[1,0], M_t[0,0])``; failed pairs
+contribute 0. The trajectory is the running sum, ``X_t = sum_{k<=t} d_k``, ``theta_t = sum a_k``,
+with ``X_0 = 0`` (N samples). Each coordinate is low-passed by a Gaussian of sigma = fps/2 frames
+(half a second; kernel truncated at 4 sigma). Before filtering each end is padded by point reflection
+(``2 a - x_k``) about ``a``, the value at that end of a least-squares line through the end's
+``round(sigma)`` samples (half a second). So a constant-velocity pan passes unchanged to the ends
+(plain reflection would read a pan of v px per frame as about 0.8 * sigma * v of jitter at each end),
+and, unlike reflecting about the end sample itself, one shaken end frame does not anchor the padding.
+The high-passed residual ``h = x - lowpass(x)`` gives
+``residual_jitter_px = sqrt(mean_t(hx_t^2 + hy_t^2))`` and
+``residual_jitter_deg = sqrt(mean_t(htheta_t^2))`` in degrees. Motion slower than about a second
+stays in the low-pass; hand shake lands in the residual. Input and output jitter are comparable.
+
+Failures
+--------
+``failed_pairs`` of ``StabilizationMetrics`` counts the failed input-output pairs plus the failed
+consecutive output pairs; ``input.failed_pairs`` counts the failed consecutive input pairs. A failed
+input-output pair is left out of cropping and distortion (NaN when all fail; ``to_dict`` writes
+NaN as None). An output whose frame size differs from the input's is resized to the input's size for
+matching, so the crop is measured against the input's frame.
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import av
+import cv2
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from pipeline.errors import InputError
+
+_MIN_INLIERS = 8
+# a step between neighbouring frames beyond these is a scene cut or a bogus fit, not camera motion
+_MAX_STEP_ROTATION_DEG = 30.0
+_MAX_STEP_SCALE = 1.5
+_MIN_STEP_ANISOTROPY = 0.7
+_LOW_BINS = 5
+
+
+@dataclass(frozen=True)
+class MetricsConfig:
+    max_side: int = 320  # longer side of the image given to the detector (SIFT doubles it internally)
+    feature: str = "sift"  # "sift" or "orb"
+    ratio: float = 0.75  # Lowe's ratio test
+    ransac_px: float = 3.0  # RANSAC reprojection threshold, pixels of the downscaled image
+    n_features: int = 1000
+    min_matches: int = 10  # a pair needs more good matches than this
+    black_level: int = 7  # a pixel is black when R, G and B are all <= this ("< 8")
+
+    def __post_init__(self) -> None:
+        if self.feature not in ("sift", "orb"):
+            raise ValueError(f"feature must be 'sift' or 'orb', not {self.feature!r}")
+        if self.max_side < 16:
+            raise ValueError(f"max_side must be at least 16, not {self.max_side}")
+
+
+def _clean(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    return value
+
+
+@dataclass
+class VideoMotionStats:
+    residual_jitter_px: float
+    residual_jitter_deg: float
+    stability_translation: float
+    stability_rotation: float
+    n_frames: int
+    failed_pairs: int
+
+    def to_dict(self) -> dict:
+        return _clean(asdict(self))
+
+
+@dataclass
+class StabilizationMetrics:
+    """Comparison of an input video and its stabilized output (see the module docstring)."""
+
+    cropping_ratio: float
+    distortion: float
+    distortion_mean: float
+    black_fraction: float
+    stability_translation: float
+    stability_rotation: float
+    residual_jitter_px: float
+    residual_jitter_deg: float
+    input: VideoMotionStats
+    n_frames: int
+    failed_pairs: int
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable (NaN becomes None), with the input's stats nested under "input"."""
+        return _clean(asdict(self))
+
+
+# ----------------------------------------------------------------------------------------------
+# Reading
+
+
+def _open(path):
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"cannot read video {p}: no such file")
+    try:
+        container = av.open(str(p))
+    except Exception as error:  # noqa: BLE001 - any failure to open means an unusable input
+        raise InputError(f"cannot read video {p}: {_one_line(error)}") from None
+    if not container.streams.video:
+        container.close()
+        raise InputError(f"cannot read video {p}: no video stream")
+    stream = container.streams.video[0]
+    stream.thread_type = "AUTO"
+    return container, stream
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split()) or type(error).__name__
+
+
+def video_fps(path) -> float:
+    """Frame rate of the first video stream (30 when the file does not say)."""
+    container, stream = _open(path)
+    try:
+        rate = stream.average_rate or stream.guessed_rate or stream.base_rate
+        fps = float(rate) if rate else 0.0
+    finally:
+        container.close()
+    return fps if math.isfinite(fps) and fps > 0 else 30.0
+
+
+def _declared_frames(path) -> int:
+    container, stream = _open(path)
+    try:
+        return int(stream.frames or 0)
+    finally:
+        container.close()
+
+
+def iter_frames(path) -> Iterator[np.ndarray]:
+    """Decoded frames of the first video stream, as RGB uint8 arrays of shape (H, W, 3)."""
+    container, stream = _open(path)
+    try:
+        try:
+            for frame in container.decode(stream):
+                yield frame.to_ndarray(format="rgb24")
+        except Exception as error:  # noqa: BLE001 - av raises many types for corrupt data
+            raise InputError(f"cannot decode video {path}: {_one_line(error)}") from None
+    finally:
+        container.close()
+
+
+# ----------------------------------------------------------------------------------------------
+# Features and pairwise homographies
+
+
+@dataclass
+class _Features:
+    points: np.ndarray  # (N, 2) float32, full-resolution pixels
+    descriptors: np.ndarray | None
+    scale: float  # detection image / full resolution
+    shape: tuple[int, int]  # full-resolution (height, width)
+
+
+def _detector(config: MetricsConfig):
+    if config.feature == "sift" and hasattr(cv2, "SIFT_create"):
+        return cv2.SIFT_create(config.n_features), cv2.NORM_L2
+    return cv2.ORB_create(config.n_features), cv2.NORM_HAMMING
+
+
+def _detect(rgb: np.ndarray, detector, config: MetricsConfig) -> _Features:
+    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY) if rgb.ndim == 3 else rgb
+    h, w = grey.shape
+    scale = min(1.0, config.max_side / max(h, w))
+    if scale < 1.0:
+        size = (max(1, round(w * scale)), max(1, round(h * scale)))
+        small = cv2.resize(grey, size, interpolation=cv2.INTER_AREA)
+        per_axis = np.array([size[0] / w, size[1] / h])  # exact, after rounding the small size
+    else:
+        small, per_axis = grey, np.ones(2)
+    keypoints, descriptors = detector.detectAndCompute(small, None)
+    if keypoints:
+        # keypoint coordinates refer to pixel centres: map centre-to-centre back to full resolution
+        pts = (np.array([kp.pt for kp in keypoints], dtype=np.float64) + 0.5) / per_axis - 0.5
+    else:
+        pts = np.zeros((0, 2))
+    return _Features(pts.astype(np.float32), descriptors, float(per_axis.min()), (h, w))
+
+
+def _plausible_step(H: np.ndarray) -> bool:
+    """Whether a consecutive-frame homography can be camera motion rather than a bogus fit (a cut)."""
+    A = H[:2, :2]
+    sv = np.linalg.svd(A, compute_uv=False)
+    scale = math.sqrt(sv[0] * sv[1])
+    angle = abs(math.degrees(math.atan2(H[1, 0], H[0, 0])))
+    return angle <= _MAX_STEP_ROTATION_DEG and 1 / _MAX_STEP_SCALE <= scale <= _MAX_STEP_SCALE and sv[1] >= _MIN_STEP_ANISOTROPY * sv[0]
+
+
+def _match(a: _Features, b: _Features, norm: int, config: MetricsConfig, consecutive: bool = False) -> np.ndarray | None:
+    """Homography H with b ~ H a in full-resolution pixels, or None when the pair fails.
+
+    ``consecutive``: the frames are neighbours in one video, so an implausible step fails too.
+    """
+    if a.descriptors is None or b.descriptors is None or len(a.descriptors) < 2 or len(b.descriptors) < 2:
+        return None
+    matcher = cv2.BFMatcher(norm)
+    knn = matcher.knnMatch(a.descriptors, b.descriptors, k=2)
+    pairs = [m for m in knn if len(m) == 2]
+    if len(pairs) <= config.min_matches:
+        return None
+    dist = np.array([(m[0].distance, m[1].distance) for m in pairs])
+    good = dist[:, 0] < config.ratio * dist[:, 1]
+    if int(good.sum()) <= config.min_matches:
+        return None
+    query = np.array([m[0].queryIdx for m in pairs])[good]
+    train = np.array([m[0].trainIdx for m in pairs])[good]
+    src = a.points[query]
+    dst = b.points[train]
+    threshold = config.ransac_px / min(a.scale, b.scale)
+    H, mask = cv2.findHomography(src, dst, cv2.RANSAC, threshold, maxIters=2000, confidence=0.995)
+    if H is None or mask is None or int(mask.sum()) < _MIN_INLIERS:
+        return None
+    if not np.all(np.isfinite(H)) or abs(H[2, 2]) < 1e-12:
+        return None
+    H = H / H[2, 2]
+    if np.linalg.det(H[:2, :2]) <= 0:
+        return None
+    if consecutive and not _plausible_step(H):
+        return None
+    return H
+
+
+def pair_homography(a_rgb: np.ndarray, b_rgb: np.ndarray, config: MetricsConfig = MetricsConfig()) -> np.ndarray | None:
+    """Homography H (3x3, H[2,2] = 1) with ``b ~ H a`` in full-resolution pixels, or None on failure."""
+    detector, norm = _detector(config)
+    return _match(_detect(a_rgb, detector, config), _detect(b_rgb, detector, config), norm, config)
+
+
+# ----------------------------------------------------------------------------------------------
+# Array-level measures
+
+
+def frame_cropping(H: np.ndarray) -> float:
+    """min(1, 1 / sqrt(|det H[:2,:2]|)) for a homography mapping input to output."""
+    s = math.sqrt(abs(float(np.linalg.det(H[:2, :2]))))
+    return min(1.0, 1.0 / s) if s > 0 else float("nan")
+
+
+def frame_distortion(H: np.ndarray) -> float:
+    """Ratio of the smaller to the larger singular value of H[:2,:2]."""
+    sv = np.linalg.svd(H[:2, :2], compute_uv=False)
+    return float(sv[-1] / sv[0]) if sv[0] > 0 else float("nan")
+
+
+def black_fraction(rgb: np.ndarray, level: int = 7) -> float:
+    """Fraction of pixels with every channel <= level that are 4-connected to the image border."""
+    img = np.ascontiguousarray(rgb)
+    lo = (0,) * (img.shape[2] if img.ndim == 3 else 1)
+    dark = cv2.inRange(img, lo, tuple(int(level) for _ in lo))  # 255 where every channel <= level
+    if not (dark[0].any() or dark[-1].any() or dark[:, 0].any() or dark[:, -1].any()):
+        return 0.0
+    n, labels = cv2.connectedComponents(dark, connectivity=4)
+    border = np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]])
+    keep = np.zeros(n, dtype=bool)
+    keep[border] = True
+    keep[0] = False  # label 0 is the non-dark background
+    counts = np.bincount(labels.ravel(), minlength=n)
+    return float(counts[keep].sum()) / dark.size
+
+
+def _low_frequency_share(signal: np.ndarray) -> float:
+    x = np.asarray(signal, dtype=np.float64)
+    if x.size < 3:
+        return float("nan")
+    energy = np.abs(np.fft.fft(x)) ** 2
+    energy = energy[1:]
+    energy = energy[: energy.size // 2]
+    total = float(energy.sum())
+    scale = float(np.max(np.abs(x))) ** 2 * x.size ** 2
+    if total <= 1e-20 * max(scale, 1e-300):
+        return 1.0
+    return float(energy[:_LOW_BINS].sum()) / total
+
+
+def stability_score(path_matrices) -> tuple[float, float]:
+    """(translation, rotation) stability of an accumulated path P_1..P_{N-1}, shape (K, 3, 3).
+
+    Translation signal: |(P[0,2], P[1,2])|; rotation: unwrapped atan2(P[1,0], P[0,0]) in degrees.
+    Each score is the energy of frequencies 1..5 over the energy of frequencies 1..(K-1)//2.
+    NaN when K < 3.
+    """
+    P = np.asarray(path_matrices, dtype=np.float64).reshape(-1, 3, 3)
+    if len(P) < 3:
+        return float("nan"), float("nan")
+    P = P / P[:, 2:3, 2:3]
+    translation = np.hypot(P[:, 0, 2], P[:, 1, 2])
+    rotation = np.degrees(np.unwrap(np.arctan2(P[:, 1, 0], P[:, 0, 0])))
+    return _low_frequency_share(translation), _low_frequency_share(rotation)
+
+
+def accumulate_path(pair_matrices) -> np.ndarray:
+    """P_t = M_t @ P_{t-1} with P_0 = I, for M_1..M_K (None = identity); returns P_1..P_K, (K, 3, 3)."""
+    P = np.eye(3)
+    out = []
+    for M in pair_matrices:
+        if M is not None:
+            P = np.asarray(M, dtype=np.float64) @ P
+            P = P / P[2, 2]
+        out.append(P.copy())
+    return np.array(out).reshape(-1, 3, 3)
+
+
+def pair_increment(M: np.ndarray | None, width: int, height: int) -> tuple[float, float, float]:
+    """(dx, dy, dangle_rad) of one pairwise homography: how it moves the frame centre and turns it."""
+    if M is None:
+        return 0.0, 0.0, 0.0
+    cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+    p = M @ np.array([cx, cy, 1.0])
+    return float(p[0] / p[2] - cx), float(p[1] / p[2] - cy), float(math.atan2(M[1, 0], M[0, 0]))
+
+
+def trajectory(pair_matrices, width: int, height: int) -> np.ndarray:
+    """(N, 3) trajectory x px, y px, angle rad: the running sum of pair increments, starting at 0."""
+    inc = np.array([pair_increment(M, width, height) for M in pair_matrices]).reshape(-1, 3)
+    return np.vstack([np.zeros((1, 3)), np.cumsum(inc, axis=0)])
+
+
+def _end_anchor(T: np.ndarray, span: int, at_start: bool) -> np.ndarray:
+    """Value at the first (or last) sample of a least-squares line through the first (last) span samples."""
+    seg = T[:span] if at_start else T[-span:]
+    if len(seg) < 2:
+        return seg[0] if at_start else seg[-1]
+    t = np.arange(len(seg), dtype=np.float64)
+    t_end = 0.0 if at_start else t[-1]
+    tc = t - t.mean()
+    slope = (tc @ (seg - seg.mean(axis=0))) / float(tc @ tc)
+    return seg.mean(axis=0) + slope * (t_end - t.mean())
+
+
+def residual_jitter(trajectory_xy_angle, fps: float) -> tuple[float, float]:
+    """(RMS px, RMS degrees) of a trajectory's high-pass residual (Gaussian sigma = fps/2 frames).
+
+    ``trajectory_xy_angle``: (N, 3) array of x, y in pixels and angle in radians. The ends are padded
+    by point reflection about a line fitted to the last half second, so constant-velocity motion
+    stays out of the residual and one noisy end frame does not anchor the padding.
+    """
+    T = np.asarray(trajectory_xy_angle, dtype=np.float64).reshape(-1, 3)
+    n = len(T)
+    if n < 2:
+        return 0.0, 0.0
+    sigma = max(float(fps), 1e-6) / 2.0
+    radius = max(1, int(4.0 * sigma + 0.5))
+    span = min(n, max(2, int(round(sigma))))
+    padded = np.pad(T, ((radius, radius), (0, 0)), mode="reflect", reflect_type="odd")  # 2 x_0 - x_k
+    padded[:radius] += 2.0 * (_end_anchor(T, span, True) - T[0])  # -> 2 a_0 - x_k
+    padded[radius + n :] += 2.0 * (_end_anchor(T, span, False) - T[-1])
+    low = gaussian_filter1d(padded, sigma, axis=0, mode="nearest", truncate=4.0)[radius : radius + n]
+    high = T - low
+    px = math.sqrt(float(np.mean(high[:, 0] ** 2 + high[:, 1] ** 2)))
+    deg = math.degrees(math.sqrt(float(np.mean(high[:, 2] ** 2))))
+    return px, deg
+
+
+def _motion_stats(pair_matrices: list, width: int, height: int, fps: float, n_frames: int) -> VideoMotionStats:
+    st, sr = stability_score(accumulate_path(pair_matrices))
+    jp, jd = residual_jitter(trajectory(pair_matrices, width, height), fps)
+    return VideoMotionStats(
+        residual_jitter_px=jp,
+        residual_jitter_deg=jd,
+        stability_translation=st,
+        stability_rotation=sr,
+        n_frames=n_frames,
+        failed_pairs=sum(1 for M in pair_matrices if M is None),
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# Videos
+
+
+def video_motion_stats(path, config: MetricsConfig = MetricsConfig()) -> VideoMotionStats:
+    """Stability scores and residual jitter of one video (one streaming pass).
+
+    Detection of frame t runs in a worker thread while frames t-2 and t-1 are matched in the other.
+    """
+    fps = video_fps(path)
+    detectors = [_detector(config) for _ in range(2)]  # one per thread: a detector is not shared
+    norm = detectors[0][1]
+    pair_futures = []
+    n = 0
+    width = height = 0
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        pending = None  # detection of the previous frame
+        last: _Features | None = None  # features of the frame before it
+        for rgb in iter_frames(path):
+            if n == 0:
+                height, width = rgb.shape[:2]
+            future = pool.submit(_detect, rgb, detectors[n % 2][0], config)
+            if pending is not None:
+                feats = pending.result()
+                if last is not None:
+                    pair_futures.append(pool.submit(_match, last, feats, norm, config, True))
+                last = feats
+            pending = future
+            n += 1
+        if pending is not None:
+            feats = pending.result()
+            if last is not None:
+                pair_futures.append(pool.submit(_match, last, feats, norm, config, True))
+        pairs = [f.result() for f in pair_futures]
+    if n == 0:
+        raise InputError(f"video {path} has no frames")
+    return _motion_stats(pairs, width, height, fps, n)
+
+
+def compare(
+    input_path,
+    output_path,
+    config: MetricsConfig = MetricsConfig(),
+    progress: Callable[[int, int], None] | None = None,
+) -> StabilizationMetrics:
+    """Measures of an output video against its input, in one streaming pass over both.
+
+    Per frame t: the input and output frames are detected once each (two worker threads), then
+    three pairs are matched: input t -> output t, output t-1 -> output t, input t-1 -> input t. The
+    matches of frame t run while frame t+1 is decoded and detected; only features of the previous
+    frame are kept. ``progress(done, total)`` is called once per frame; total is the input's
+    declared frame count (0 when unknown). Raises InputError when a video cannot be read or the
+    frame counts differ.
+    """
+    fps_in = video_fps(input_path)
+    fps_out = video_fps(output_path)
+    total = _declared_frames(input_path)
+    detectors = [_detector(config) for _ in range(2)]  # one per thread: a detector is not shared
+    norm = detectors[0][1]
+
+    in_iter = iter_frames(input_path)
+    out_iter = iter_frames(output_path)
+    prev_in: _Features | None = None
+    prev_out: _Features | None = None
+    in_pairs: list = []
+    out_pairs: list = []
+    crops: list[float] = []
+    dists: list[float] = []
+    blacks: list[float] = []
+    failed_io = 0
+    n = 0
+    done = 0
+    width = height = 0
+
+    def collect(jobs) -> None:
+        nonlocal failed_io, done
+        results = [j.result() for j in jobs]
+        H = results[0]
+        if H is None:
+            failed_io += 1
+        else:
+            crops.append(frame_cropping(H))
+            dists.append(frame_distortion(H))
+        if len(results) == 3:
+            out_pairs.append(results[1])
+            in_pairs.append(results[2])
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        pending = None  # match jobs of the previous frame
+        while True:
+            a = next(in_iter, None)
+            b = next(out_iter, None)
+            if a is None or b is None:
+                if a is None and b is None:
+                    break
+                n_in = n + (a is not None) + sum(1 for _ in in_iter)
+                n_out = n + (b is not None) + sum(1 for _ in out_iter)
+                raise InputError(f"frame counts differ: input has {n_in} frames, output has {n_out}")
+            if n == 0:
+                height, width = a.shape[:2]
+            blacks.append(black_fraction(b, config.black_level))
+            if b.shape[:2] != a.shape[:2]:
+                b = cv2.resize(b, (a.shape[1], a.shape[0]), interpolation=cv2.INTER_AREA)
+            fut_a = pool.submit(_detect, a, detectors[0][0], config)
+            fut_b = pool.submit(_detect, b, detectors[1][0], config)
+            if pending is not None:
+                collect(pending)
+            fa, fb = fut_a.result(), fut_b.result()
+            pending = [pool.submit(_match, fa, fb, norm, config)]
+            if prev_in is not None:
+                pending.append(pool.submit(_match, prev_out, fb, norm, config, True))
+                pending.append(pool.submit(_match, prev_in, fa, norm, config, True))
+            prev_in, prev_out = fa, fb
+            n += 1
+        if pending is not None:
+            collect(pending)
+
+    if n == 0:
+        raise InputError(f"video {input_path} has no frames")
+    out_stats = _motion_stats(out_pairs, width, height, fps_out, n)
+    in_stats = _motion_stats(in_pairs, width, height, fps_in, n)
+    nan = float("nan")
+    return StabilizationMetrics(
+        cropping_ratio=float(np.mean(crops)) if crops else nan,
+        distortion=float(np.min(dists)) if dists else nan,
+        distortion_mean=float(np.mean(dists)) if dists else nan,
+        black_fraction=float(np.mean(blacks)),
+        stability_translation=out_stats.stability_translation,
+        stability_rotation=out_stats.stability_rotation,
+        residual_jitter_px=out_stats.residual_jitter_px,
+        residual_jitter_deg=out_stats.residual_jitter_deg,
+        input=in_stats,
+        n_frames=n,
+        failed_pairs=failed_io + out_stats.failed_pairs,
+    )
