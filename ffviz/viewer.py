@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -15,10 +17,19 @@ RRD_MAGIC = b"RRF2"
 
 
 def rerun_executable() -> str:
-    """The `rerun` CLI that ships inside the rerun-sdk wheel (beside this Python), else the one on PATH."""
-    beside = Path(sys.executable).parent / "rerun"
-    if beside.is_file():
-        return str(beside)
+    """The viewer binary shipped inside the rerun-sdk wheel, else a `rerun` on PATH.
+
+    The binary itself, not the `rerun` console script: that shim runs it as a grandchild, which
+    terminating the shim would leave behind.
+    """
+    try:
+        import rerun_cli
+
+        binary = Path(rerun_cli.__file__).parent / "rerun"
+        if binary.is_file():
+            return str(binary)
+    except ImportError:
+        pass
     found = shutil.which("rerun")
     if found is None:
         raise InputError("the rerun viewer executable was not found (is rerun-sdk installed in this environment?)")
@@ -78,10 +89,18 @@ def serve(path: Path, *, web_port: int = 9090, grpc_port: int = 9876, native: bo
         command = web_viewer_command(path, web_port=web_port, grpc_port=grpc_port)
         url = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
         print(f"serving {path} at {url}  (Ctrl-C to stop)", flush=True)
-    process = subprocess.Popen(command)
+    env = dict(os.environ)
+    env.setdefault("RERUN_ANALYTICS", "0")  # offline tool: no first-run analytics banner or calls
+    process = subprocess.Popen(command, env=env, start_new_session=True)
     try:
         return process.wait()
     except KeyboardInterrupt:
-        process.terminate()
-        process.wait(timeout=10)
         return 0
+    finally:
+        # Whatever ends us (Ctrl-C, SIGTERM via the CLI's handler, an error), the viewer goes too.
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGTERM)
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
