@@ -3,7 +3,8 @@
 For each clip: one motion pass, then for each k the smoothed path's residual jitter (the same
 high-pass measure as pipeline.metrics: RMS of the path minus its Gaussian low-pass with sigma = fps/2
 frames) and the crop it costs (area kept by the largest window valid in every frame).
-Usage: python benchmarks/choose_k.py [CLIPS...]   (default: every clip in ../shared/videos)
+Usage: python benchmarks/choose_k.py [--radii 0,6,15] [CLIPS...]   (default: every clip in ../shared/videos)
+With --radii 0 it measures a video's own residual jitter, e.g. a peer's output, on the same scale.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from pipeline import motion, smoothing, stabilize, video_io, warping
 from pipeline.observer import NullObserver, null_progress
+from pipeline.source import FileSource
 
 RADII = (0, 4, 6, 10, 15, 20, 30, 45)
 VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
@@ -27,15 +29,18 @@ def high_pass_rms(path_xy: np.ndarray, fps: float) -> float:
 
 
 def main(argv: list[str]) -> int:
+    radii = RADII
+    if argv[:1] == ["--radii"]:
+        radii, argv = tuple(int(k) for k in argv[1].split(",")), argv[2:]
     clips = [Path(a) for a in argv] or sorted(p for p in VIDEOS.iterdir() if p.suffix in (".mp4", ".avi"))
-    print(f"{'clip':34s} " + " ".join(f"k={k:<2d} jit/crop" for k in RADII))
+    print(f"{'clip':34s} " + " ".join(f"k={k:<2d} jit/crop" for k in radii))
     table = []
     for clip in clips:
         info = video_io.probe_video(clip)
-        passed = stabilize.estimate_motion(clip, motion.MotionConfig(), observer=NullObserver(),
+        passed = stabilize.estimate_motion(FileSource(clip), motion.MotionConfig(), observer=NullObserver(),
                                            progress=null_progress, total=None)
         row = []
-        for k in RADII:
+        for k in radii:
             result = smoothing.smooth(passed.curr_from_prev, smoothing.SmoothingConfig(radius=k), cuts=passed.cuts,
                                       width=info.width, height=info.height)
             jitter = high_pass_rms(result.smoothed_trajectory[:, :2], float(info.fps))

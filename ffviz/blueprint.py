@@ -33,10 +33,26 @@ def default_blueprint() -> rrb.Blueprint:
             rrb.TimeSeriesView(name="residual (px)", origin=f"/{ent.MOTION_RESIDUAL}"),
         ),
     )
+    completion = rrb.Grid(
+        rrb.Spatial2DView(name="stabilized (missing in red)", origin="/stabilized"),
+        rrb.Spatial2DView(name="mosaic variance (eq. 20)", origin="/", contents=[f"/{ent.COMPLETION_VARIANCE}"]),
+        rrb.Spatial2DView(name="mosaic accepted (green) / rejected (red)", origin="/",
+                          contents=[f"/{ent.STABILIZED_FRAME}", f"/{ent.COMPLETION_ACCEPTED}"]),
+        rrb.Spatial2DView(name="local flow, motion-inpainted", origin="/completion/flow"),
+        rrb.Spatial2DView(name="FMM visiting order", origin="/", contents=[f"/{ent.COMPLETION_FMM_ORDER}"]),
+        rrb.Spatial2DView(name="FMM arrival time T", origin="/", contents=[f"/{ent.COMPLETION_FMM_ARRIVAL}"]),
+        rrb.Spatial2DView(name="filled by (neighbour offset / mosaic / fallback)", origin="/",
+                          contents=[f"/{ent.COMPLETION_FRAME}", f"/{ent.COMPLETION_FILLED_BY}", f"/{ent.COMPLETION_FALLBACK}"]),
+        rrb.Spatial2DView(name="completed", origin="/", contents=[f"/{ent.COMPLETION_FRAME}"]),
+        rrb.TimeSeriesView(name="fraction of frame: missing / mosaic / local warp / fallback",
+                           origin=f"/{ent.COMPLETION_STATS}"),
+        name="completion",
+    )
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Tabs(
                 rrb.Vertical(frames, name="frames"),
+                completion,
                 rrb.Vertical(trajectories, name="trajectories"),
                 rrb.Vertical(motion, name="motion"),
                 rrb.TextDocumentView(name="about", origin=f"/{ent.META}"),

@@ -23,3 +23,14 @@ STABILIZED_FRAME = "stabilized/frame"
 STABILIZED_MISSING = "stabilized/missing"
 
 OUTPUT_FRAME = "output/frame"
+
+COMPLETION_VARIANCE = "completion/mosaic/variance"
+COMPLETION_ACCEPTED = "completion/mosaic/accepted"
+COMPLETION_FLOW_IMAGE = "completion/flow/image"  # colour-coded local flow (first neighbour), inpainted area included
+COMPLETION_FLOW_ARROWS = "completion/flow/arrows"
+COMPLETION_FMM_ORDER = "completion/fmm/order"
+COMPLETION_FMM_ARRIVAL = "completion/fmm/arrival"
+COMPLETION_FILLED_BY = "completion/filled_by"
+COMPLETION_FALLBACK = "completion/fallback"
+COMPLETION_FRAME = "completion/frame"
+COMPLETION_STATS = "completion/stats"  # /{missing,mosaic,local_warp,fallback}: fraction of the frame

@@ -16,9 +16,10 @@ import numpy as np
 import rerun as rr
 
 import ffviz
-from ffviz import entities as ent
+from ffviz import entities as ent, visual
 from ffviz.blueprint import default_blueprint
 from pipeline import geometry
+from pipeline.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
 from pipeline.motion import MotionEstimate
 from pipeline.observer import Stamp
 from pipeline.smoothing import SmoothingResult
@@ -29,6 +30,7 @@ RecordLevel = Literal["summary", "full"]
 RECORD_LEVELS: tuple[str, ...] = ("summary", "full")
 MISSING_CLASS = 1
 MAX_FEATURE_ARROWS = 300  # enough to read the motion, few enough to keep files small
+FILLED_BY_BASE = 100  # filled_by class of a local-warp pixel: FILLED_BY_BASE + neighbour offset
 
 
 class RerunRecorder:
@@ -64,6 +66,12 @@ class RerunRecorder:
         self.rec.log(ent.STABILIZED_MISSING, rr.AnnotationContext([(0, "valid", (0, 0, 0, 0)),
                                                                     (MISSING_CLASS, "missing", (255, 0, 64, 160))]),
                      static=True)
+        self.rec.log(ent.COMPLETION_ACCEPTED, rr.AnnotationContext([
+            (0, "known", (0, 0, 0, 0)), (1, "missing, rejected", (255, 0, 64, 160)),
+            (2, "accepted by mosaic", (40, 200, 90, 160))]), static=True)
+        self.rec.log(ent.COMPLETION_FALLBACK, rr.AnnotationContext([(0, "other", (0, 0, 0, 0)),
+                                                                     (1, "fallback", (255, 200, 0, 200))]), static=True)
+        self.rec.log(ent.COMPLETION_FILLED_BY, rr.AnnotationContext(self._filled_by_legend()), static=True)
         for name, colour in (("original", (230, 90, 60)), ("smoothed", (40, 120, 230))):
             root = ent.TRAJECTORY_ORIGINAL if name == "original" else ent.TRAJECTORY_SMOOTHED
             for axis in ent.TRAJECTORY_AXES:
@@ -126,6 +134,42 @@ class RerunRecorder:
             self.rec.log(ent.STABILIZED_FRAME, self._image(result.frame))
             self.rec.log(ent.STABILIZED_MISSING, rr.SegmentationImage(result.missing.astype(np.uint8) * MISSING_CLASS))
 
+    def _on_completion(self, stamp: Stamp, result: CompletionResult) -> None:
+        self._set_time(stamp)
+        frame_area = result.missing.size
+        counts = np.bincount(result.source.ravel(), minlength=len(SOURCE_NAMES))
+        self.rec.log(f"{ent.COMPLETION_STATS}/missing", rr.Scalars(result.missing.sum() / frame_area))
+        for code, name in enumerate(SOURCE_NAMES[1:], start=1):
+            self.rec.log(f"{ent.COMPLETION_STATS}/{name.replace(' ', '_')}", rr.Scalars(counts[code] / frame_area))
+        if self.level != "full":
+            return
+        self.rec.log(ent.COMPLETION_FRAME, self._image(result.frame))
+        self.rec.log(ent.COMPLETION_VARIANCE, rr.DepthImage(visual.finite_or_nan(result.mosaic.variance),
+                                                            colormap="turbo"))
+        self.rec.log(ent.COMPLETION_ACCEPTED, rr.SegmentationImage(
+            np.where(result.mosaic.accepted, 2, np.where(result.missing, 1, 0)).astype(np.uint8)))
+        self.rec.log(ent.COMPLETION_FILLED_BY, rr.SegmentationImage(self._filled_by_classes(result)))
+        self.rec.log(ent.COMPLETION_FALLBACK, rr.SegmentationImage(result.fallback.astype(np.uint8)))
+        if result.fills:
+            first = result.fills[0]
+            self.rec.log(ent.COMPLETION_FLOW_IMAGE, self._image(visual.flow_to_rgb(first.inpainted.flow)))
+            origins, vectors = visual.sparse_arrows(first.inpainted.flow)
+            self.rec.log(ent.COMPLETION_FLOW_ARROWS, rr.Arrows2D(origins=origins, vectors=vectors))
+            order = first.inpainted.order.astype(np.float32)
+            order[order < 0] = np.nan
+            self.rec.log(ent.COMPLETION_FMM_ORDER, rr.DepthImage(order, colormap="viridis"))
+            self.rec.log(ent.COMPLETION_FMM_ARRIVAL, rr.DepthImage(visual.finite_or_nan(first.inpainted.arrival),
+                                                                   colormap="magma"))
+
+    def _filled_by_classes(self, result: CompletionResult) -> np.ndarray:
+        """Class per pixel: 0 original, 1 mosaic, 2 fallback, FILLED_BY_BASE + offset for local warps."""
+        classes = np.zeros(result.source.shape, np.uint8)
+        classes[result.source == SOURCE_MOSAIC] = 1
+        classes[result.source == SOURCE_FALLBACK] = 2
+        warped = result.source == SOURCE_LOCAL_WARP
+        classes[warped] = (FILLED_BY_BASE + result.filled_by[warped]).astype(np.uint8)
+        return classes
+
     def _on_output(self, stamp: Stamp, rgb: np.ndarray) -> None:
         self._set_time(stamp)
         self.rec.log(ent.OUTPUT_FRAME, self._image(rgb))
@@ -139,6 +183,16 @@ class RerunRecorder:
     def _image(self, rgb: np.ndarray) -> Any:
         image = rr.Image(np.ascontiguousarray(rgb), color_model="RGB")
         return image if self.jpeg_quality is None else image.compress(jpeg_quality=self.jpeg_quality)
+
+    @staticmethod
+    def _filled_by_legend(max_offset: int = 30) -> list:
+        legend = [(0, "original", (0, 0, 0, 0)), (1, "mosaic", (40, 200, 90, 170)), (2, "fallback", (255, 200, 0, 200))]
+        for offset in range(-max_offset, max_offset + 1):
+            if offset:
+                hue = (offset + max_offset) / (2 * max_offset)
+                colour = tuple(int(255 * c) for c in (hue, 0.3, 1.0 - hue)) + (190,)
+                legend.append((FILLED_BY_BASE + offset, f"neighbour {offset:+d}", colour))
+        return legend
 
     @staticmethod
     def _meta_markdown(info: Any, config: Any) -> str:

@@ -15,19 +15,22 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline import motion, smoothing, video_io, warping
+from pipeline import completion, motion, smoothing, video_io, warping
+from pipeline.source import FileSource, FrameSource, one_pass
+from pipeline.window import sliding_window
 from pipeline.errors import InputError
 from pipeline.observer import NullObserver, Observer, ProgressFactory, Stamp, null_progress
 
-OutputMode = Literal["none", "crop"]
-OUTPUT_MODES: tuple[str, ...] = ("none", "crop")
+OutputMode = Literal["full", "none", "crop"]
+OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
 
 
 @dataclass(frozen=True)
 class StabilizeConfig:
-    mode: OutputMode = "crop"
+    mode: OutputMode = "full"
     motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
     smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
+    completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
 
     def __post_init__(self) -> None:
         if self.mode not in OUTPUT_MODES:
@@ -66,7 +69,7 @@ class StabilizeReport:
         return self.seconds_motion + self.seconds_render
 
 
-def estimate_motion(path: Path, config: motion.MotionConfig, *, observer: Observer,
+def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observer: Observer,
                     progress: ProgressFactory, total: int | None) -> MotionPass:
     transforms: list[np.ndarray] = []
     statuses: list[str] = []
@@ -75,10 +78,10 @@ def estimate_motion(path: Path, config: motion.MotionConfig, *, observer: Observ
     bar = progress("pass 1/2: motion", total)
     previous: motion.PreparedFrame | None = None
     try:
-        with video_io.VideoReader(path) as reader:
-            for frame in reader:
+        with one_pass(source) as frames:
+            for frame in frames:
                 stamp = Stamp(frame.index, frame.time_s)
-                _forward_reader_warnings(reader, stamp, observer, warnings)
+                _forward_warnings(source, stamp, observer, warnings)
                 prepared = motion.prepare(frame.rgb, config)
                 if previous is None:
                     estimate = motion.first_frame_estimate()
@@ -95,20 +98,18 @@ def estimate_motion(path: Path, config: motion.MotionConfig, *, observer: Observ
                 times.append(frame.time_s)
                 previous = prepared
                 bar.update()
-            _forward_reader_warnings(reader, None, observer, warnings)
+        _forward_warnings(source, None, observer, warnings)
     finally:
         bar.close()
     if not transforms:
-        raise InputError(f"{path}: no decodable video frames")
+        raise InputError(f"{source.info.path}: no decodable video frames")
     return MotionPass(np.array(transforms), statuses, times, warnings)
 
 
-def _forward_reader_warnings(reader: video_io.VideoReader, stamp: Stamp | None, observer: Observer,
-                             sink: list[tuple[int | None, str]]) -> None:
+def _forward_warnings(source: FrameSource, stamp: Stamp | None, observer: Observer,
+                      sink: list[tuple[int | None, str]]) -> None:
     """Decoder complaints (corrupt packets skipped) become warnings like any other."""
-    pending = getattr(reader, "warnings", None)
-    while pending:
-        message = pending.pop(0)
+    for message in source.drain_warnings():
         sink.append((stamp.index if stamp else None, message))
         observer.on_warning(stamp, message)
 
@@ -128,16 +129,24 @@ def stabilize(input_path: Path | str, output_path: Path | str | None, config: St
               observer: Observer | None = None, progress: ProgressFactory = null_progress,
               overwrite: bool = False, crf: int = 18) -> StabilizeReport:
     """Stabilize ``input_path`` into ``output_path`` (None: run and observe, write nothing)."""
-    observer = observer or NullObserver()
     input_path = Path(input_path)
     output_path = Path(output_path) if output_path is not None else None
-    info = video_io.probe_video(input_path)
+    source = FileSource(input_path)
     if output_path is not None:
         video_io.check_output_path(output_path, input_path, overwrite=overwrite)
+    return stabilize_source(source, output_path, config, observer=observer, progress=progress, crf=crf)
+
+
+def stabilize_source(source: FrameSource, output_path: Path | None, config: StabilizeConfig = StabilizeConfig(), *,
+                     observer: Observer | None = None, progress: ProgressFactory = null_progress,
+                     crf: int = 18) -> StabilizeReport:
+    """The two passes over any frame source; the output (if any) must already be checked."""
+    observer = observer or NullObserver()
+    info = source.info
     observer.on_start(info, config)
 
     started = time.perf_counter()
-    motion_pass = estimate_motion(input_path, config.motion, observer=observer, progress=progress,
+    motion_pass = estimate_motion(source, config.motion, observer=observer, progress=progress,
                                   total=info.frame_count or None)
     n_frames = len(motion_pass.statuses)
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
@@ -153,10 +162,10 @@ def stabilize(input_path: Path | str, output_path: Path | str | None, config: St
     seconds_motion = time.perf_counter() - started
 
     started = time.perf_counter()
-    _render(input_path, output_path, info, smoothed.orig_from_stab, orig_from_out, config,
-            observer=observer, progress=progress, total=n_frames, crf=crf, warnings=warnings)
+    _render(source, output_path, motion_pass.curr_from_prev, smoothed, orig_from_out, config,
+            observer=observer, progress=progress, total=n_frames, crf=crf)
     report = StabilizeReport(
-        input_path=input_path, output_path=output_path, n_frames=n_frames, mode=config.mode, crop=crop,
+        input_path=info.path, output_path=output_path, n_frames=n_frames, mode=config.mode, crop=crop,
         cuts=motion_pass.cuts, fallbacks=[t for t, s in enumerate(motion_pass.statuses) if s == "fallback"],
         warnings=warnings, seconds_motion=seconds_motion, seconds_render=time.perf_counter() - started,
     )
@@ -164,21 +173,39 @@ def stabilize(input_path: Path | str, output_path: Path | str | None, config: St
     return report
 
 
-def _render(input_path: Path, output_path: Path | None, info: video_io.VideoInfo, orig_from_stab: np.ndarray,
-            orig_from_out: np.ndarray, config: StabilizeConfig, *, observer: Observer, progress: ProgressFactory,
-            total: int, crf: int, warnings: list[tuple[int | None, str]]) -> None:
-    bar = progress("pass 2/2: warp + encode", total)
-    writer = video_io.VideoWriter(output_path, like=info, audio_from=input_path, crf=crf) if output_path else None
+def _render(source: FrameSource, output_path: Path | None, curr_from_prev: np.ndarray,
+            smoothed: smoothing.SmoothingResult, orig_from_out: np.ndarray, config: StabilizeConfig, *,
+            observer: Observer, progress: ProgressFactory, total: int, crf: int) -> None:
+    orig_from_stab = smoothed.orig_from_stab
+    full = config.mode == "full"
+    radius = config.completion.radius if full else 0
+    segment_of = np.searchsorted(smoothed.segment_starts, np.arange(len(orig_from_stab)), side="right") - 1
+    bar = progress("pass 2/2: warp + complete + encode" if full else "pass 2/2: warp + encode", total)
+    info = source.info
+    audio_from = info.path if info.has_audio else None
+    writer = video_io.VideoWriter(output_path, like=info, audio_from=audio_from, crf=crf) if output_path else None
     try:
-        with video_io.VideoReader(input_path) as reader:
-            for frame in reader:
+        with one_pass(source) as frames:
+            for window in sliding_window(frames, radius):
+                frame = window.centre
                 stamp = Stamp(frame.index, frame.time_s)
                 # Decoding is deterministic, so pass 2 sees pass 1's frames; guard anyway.
                 t = min(frame.index, len(orig_from_stab) - 1)
                 observer.on_stage("input", stamp, frame)
                 stabilized = warping.warp_frame(frame.rgb, orig_from_stab[t])
                 observer.on_stage("warp", stamp, stabilized)
-                output = stabilized.frame if config.mode != "crop" else warping.warp(frame.rgb, orig_from_out[t])
+                if full:
+                    # Neighbours from the same shot only: nothing is carried across a scene cut.
+                    same_shot = {n.index: n.rgb for n in window.neighbours.values()
+                                 if n.index < len(segment_of) and segment_of[n.index] == segment_of[t]}
+                    neighbours = completion.warp_neighbours(same_shot, t, curr_from_prev, orig_from_stab[t])
+                    completed = completion.complete(stabilized.frame, stabilized.missing, neighbours, config.completion)
+                    observer.on_stage("completion", stamp, completed)
+                    output = completed.frame
+                elif config.mode == "crop":
+                    output = warping.warp(frame.rgb, orig_from_out[t])
+                else:
+                    output = stabilized.frame
                 observer.on_stage("output", stamp, output)
                 if writer is not None:
                     writer.write(output, pts=frame.pts, time_s=frame.time_s)

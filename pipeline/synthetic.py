@@ -84,6 +84,7 @@ class SyntheticConfig:
     # Moving foreground object.
     moving_object: bool = True
     object_radius_px: float = 40.0
+    object_sweep: float = 0.6  # fraction of the frame width its path spans (centred); > 1: enters/leaves through the borders
     # Motion blur.
     blurred_frames: tuple[int, ...] | None = None  # None -> default_blurred_frames(n_frames); () -> none
     blur_length_px: float = 12.0
@@ -499,7 +500,7 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
         k = cfg.object_radius_px / _PATCH_RADIUS
         frac = t / max(n - 1, 1)
         base_x = cfg.pan_px_per_frame * t + shift_x
-        ox = base_x + direction * (-0.3 + 0.6 * frac) * w
+        ox = base_x + direction * (-0.5 + frac) * cfg.object_sweep * w
         oy = shift_y + obj_y[0] + (obj_y[1] - obj_y[0]) * frac + 0.04 * h * np.sin(2 * math.pi * 0.5 * sec + obj_bob_phase)
         obj_pose = np.stack(
             [

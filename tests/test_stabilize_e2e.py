@@ -174,3 +174,27 @@ def test_real_clips_keep_frame_count_fps_size_and_audio(clip, mode, tmp_path):
         with av.open(str(out)) as container:
             audio = container.streams.audio[0]
             assert audio.duration is None or float(audio.duration * audio.time_base) > 0.9 * info_in.duration_s
+
+
+def test_metrics_cli_reports_less_jitter_after_stabilizing(shaky, tmp_path, capsys):
+    import json
+
+    path, _ = shaky
+    out = tmp_path / "steady.mp4"
+    assert cli.main(["stabilize", str(path), "-o", str(out), "--mode", "crop", "-k", "30"]) == 0
+    capsys.readouterr()
+    assert cli.main(["metrics", str(path), str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["residual_jitter_px"] < 0.6 * report["input"]["residual_jitter_px"]
+    assert 0.5 < report["cropping_ratio"] < 1.0  # crop mode zooms in
+    assert report["distortion"] > 0.9  # a similarity-like crop, no shear
+    assert report["black_fraction"] < 0.001
+
+
+def test_demo_runs_and_checks_itself_against_the_ground_truth(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["demo", "--frames", "30", "-o", str(tmp_path / "demo")]) == 0
+    printed = capsys.readouterr().out
+    assert "median corner error" in printed
+    assert (tmp_path / "demo" / "demo_stabilized_crop.mp4").is_file()
+    assert (tmp_path / "recordings" / "demo.rrd").is_file()

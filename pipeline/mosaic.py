@@ -1,0 +1,148 @@
+"""Mosaicing with the consistency constraint (thesis 4.2.1, eqs. 20-22).
+
+Each neighbour t' has already been warped into frame t's stabilized coordinates (the caller composes S_t'
+with the inter-frame chain) and comes with its validity mask. For every missing pixel p of frame t covered
+by n >= ``min_neighbours`` neighbours, eq. 20 gives the variance of their intensities
+(0.30 R + 0.59 G + 0.11 B, 0..255), with the n-1 denominator and the mean of eq. 21. A low variance means the
+neighbours agree, i.e. p shows static, well-registered scene, and p is filled with the median (eq. 22); a high
+variance means a moving object or misregistration, and p stays missing for motion inpainting.
+
+The median of colour pixels: the colour of the neighbour whose *intensity* is the median (for an even count,
+the mean of the two middle neighbours' colours). So the filled intensity is exactly the median of the
+intensities, as eq. 22 states, and the colour is an observed one, never a per-channel mix of different frames.
+
+Threshold choice (T = 100, i.e. the neighbours' intensities spread by ~10 grey levels). Measured on
+pipeline.synthetic clips (coffee, astronaut, chelsea; 640x360, 30 frames so the object moves ~13 px per frame;
+frames 8, 14, 20 with neighbours t-5..t+5 warped into t's intended view by the exact transforms, each
+neighbour optionally misregistered by a random 0.5 or 1 px shift; missing: 120 px border bands plus a band
+through the object). "static acc": accepted fraction of judged pixels no frame of the window shows the object
+on; "obj rej": rejected fraction of the object's footprint at t; PSNR of all accepted pixels against the truth::
+
+    variance (intensity^2)    static p50  p90   p99  | object footprint p10  p50
+    exact registration           0.1      0.5    6   |                  560  2140
+    0.5 px misregistration       1.0     21    259   |                  555  2137
+    1.0 px misregistration       3.8     75    851   |                  587  2176
+
+      T  | exact: static acc obj rej PSNR | 0.5 px: static acc obj rej PSNR | 1 px: static acc obj rej PSNR
+     25  |           0.998    0.988  40.8 |            0.911    0.990  40.0 |          0.787    0.991  38.6
+     50  |           0.999    0.983  39.7 |            0.950    0.985  38.7 |          0.865    0.986  37.2
+    100  |           0.999    0.974  38.4 |            0.973    0.977  37.4 |          0.920    0.977  35.8
+    200  |           1.000    0.961  36.9 |            0.987    0.962  35.9 |          0.955    0.964  34.4
+    400  |           1.000    0.929  34.8 |            0.995    0.930  34.0 |          0.977    0.934  32.8
+    800  |           1.000    0.845  31.8 |            0.999    0.846  31.3 |          0.989    0.853  30.5
+
+T = 100 keeps ~97% of the static pixels at half a pixel of registration error while leaving ~98% of the moving
+object's footprint to motion inpainting; a larger T starts accepting the object (ghosts), a smaller one gains
+1-3 dB on the accepted pixels only by handing many more static ones (textured edges) on to the costlier
+motion-inpainting stage.
+
+Speed: only the missing pixels are gathered, as (n, m) samples, so the cost follows the missing area, not the
+frame; the median uses pairwise rank counting (faster than argsort along a short axis). With 10 neighbours and
+10% of the frame missing: ~7 ms at 640x360, ~90 ms at 1920x1080 (2 loaded CPU cores); ~1 ms when nothing is
+missing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+INTENSITY_WEIGHTS = np.array([0.30, 0.59, 0.11], np.float32)  # thesis 4.2.1 (after [17])
+
+
+@dataclass(frozen=True)
+class MosaicConfig:
+    # Largest eq. 20 variance (intensity, 0..255 units) at which the neighbours count as consistent.
+    variance_threshold: float = 100.0
+    # A pixel needs at least this many covering neighbours to be judged (eq. 20 divides by n-1).
+    min_neighbours: int = 2
+
+    def __post_init__(self) -> None:
+        if self.min_neighbours < 2:
+            raise ValueError(f"min_neighbours must be >= 2 (eq. 20 divides by n-1), not {self.min_neighbours}")
+        if not self.variance_threshold > 0:
+            raise ValueError(f"variance_threshold must be positive, not {self.variance_threshold}")
+
+
+@dataclass(frozen=True)
+class MosaicResult:
+    frame: np.ndarray  # (H, W, 3) uint8: the target with the accepted missing pixels filled (eq. 22)
+    variance: np.ndarray  # (H, W) float32: eq. 20; NaN outside the missing area or with < min_neighbours covering
+    accepted: np.ndarray  # (H, W) bool: missing pixels filled here (variance < threshold)
+    remaining: np.ndarray  # (H, W) bool: still missing after this stage
+    coverage: np.ndarray  # (H, W) uint8: how many neighbours cover each pixel
+
+
+def intensity(rgb: np.ndarray) -> np.ndarray:
+    """0.30 R + 0.59 G + 0.11 B as float32, for (..., 3) arrays."""
+    # cv2.transform: numpy's matmul with a length-3 vector is ~20x slower on large stacks.
+    flat = np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1, 1, 3)
+    return cv2.transform(flat, INTENSITY_WEIGHTS.reshape(1, 3)).reshape(rgb.shape[:-1])
+
+
+def _ranks(values: np.ndarray) -> np.ndarray:
+    """(n, m) -> the rank of each sample among its column's n samples, ties broken by row order.
+
+    Pairwise counting: n(n-1)/2 vectorised comparisons, faster than argsort along a short axis for n <~ 16.
+    """
+    n = len(values)
+    rank = np.zeros(values.shape, np.uint8)
+    for i in range(n):
+        for j in range(i + 1, n):
+            j_first = values[j] < values[i]
+            rank[i] += j_first
+            rank[j] += ~j_first
+    return rank
+
+
+def consistent_mosaic(
+    target: np.ndarray,
+    missing: np.ndarray,
+    neighbours: Sequence[np.ndarray],
+    neighbour_valid: Sequence[np.ndarray],
+    config: MosaicConfig = MosaicConfig(),
+) -> MosaicResult:
+    """Fill the missing pixels of ``target`` on which the warped neighbours agree (eqs. 20-22)."""
+    height, width = missing.shape
+    if len(neighbours) != len(neighbour_valid):
+        raise ValueError(f"{len(neighbours)} neighbours but {len(neighbour_valid)} validity masks")
+    coverage = np.zeros((height, width), np.uint8)
+    for valid in neighbour_valid:
+        coverage += valid
+    frame = target.copy()
+    variance = np.full((height, width), np.nan, np.float32)
+    accepted = np.zeros((height, width), bool)
+
+    ys, xs = np.nonzero(missing)
+    if len(ys) == 0 or not neighbours:
+        return MosaicResult(frame, variance, accepted, missing.copy(), coverage)
+
+    # Gather only the missing pixels, as (n, m) samples instead of n full frames (np.take on flat indices is
+    # several times faster than boolean indexing of (H, W, 3) arrays).
+    flat = ys * width + xs
+    colours = np.stack([np.take(image.reshape(-1, 3), flat, axis=0) for image in neighbours])  # (n, m, 3) uint8
+    valid = np.stack([np.take(v.reshape(-1), flat) for v in neighbour_valid])  # (n, m) bool
+    count = valid.sum(axis=0)
+    judged = count >= config.min_neighbours
+
+    values = intensity(colours) * valid
+    mean = values.sum(axis=0) / np.maximum(count, 1)  # eq. 21
+    deviation = (values - mean) * valid
+    sample_variance = np.einsum("nm,nm->m", deviation, deviation) / np.maximum(count - 1, 1)  # eq. 20
+    sample_variance = np.where(judged, sample_variance, np.nan).astype(np.float32)
+    ok = judged & (sample_variance < config.variance_threshold)
+
+    # Median by intensity (eq. 22): invalid samples rank last, so ranks (count-1)//2 and count//2 are the middle.
+    rank = _ranks(np.where(valid, values, np.inf))
+    lower = np.argmax(rank == np.maximum(count - 1, 0) // 2, axis=0)
+    upper = np.argmax(rank == count // 2, axis=0)
+    columns = np.arange(len(flat))
+    median = (colours[lower, columns].astype(np.uint16) + colours[upper, columns] + 1) // 2
+
+    frame.reshape(-1, 3)[flat[ok]] = median[ok].astype(np.uint8)
+    variance.reshape(-1)[flat] = sample_variance
+    accepted.reshape(-1)[flat[ok]] = True
+    return MosaicResult(frame, variance, accepted, missing & ~accepted, coverage)

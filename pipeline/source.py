@@ -1,0 +1,84 @@
+"""Where frames come from: a video file, or frames already in memory (tests, ground-truth evaluation).
+
+The orchestrator makes two passes, so a source hands out a fresh iterator per pass.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from fractions import Fraction
+from pathlib import Path
+from typing import Iterator, Protocol, Sequence
+
+import numpy as np
+
+from pipeline import video_io
+from pipeline.errors import InputError
+
+
+class FrameSource(Protocol):
+    info: video_io.VideoInfo
+
+    def frames(self) -> Iterator[video_io.Frame]:
+        """A new pass over every frame; closing the iterator releases what it holds."""
+
+    def drain_warnings(self) -> list[str]:
+        """Decoder warnings gathered since the last call."""
+
+
+class FileSource:
+    def __init__(self, path: Path | str) -> None:
+        self.path = Path(path)
+        self.info = video_io.probe_video(self.path)
+        self._warnings: list[str] = []
+        self._reader: video_io.VideoReader | None = None
+
+    def frames(self) -> Iterator[video_io.Frame]:
+        with video_io.VideoReader(self.path) as reader:
+            self._reader = reader
+            try:
+                yield from reader
+            finally:
+                self._warnings.extend(reader.warnings)
+                reader.warnings.clear()
+                self._reader = None
+
+    def drain_warnings(self) -> list[str]:
+        if self._reader is not None:
+            self._warnings.extend(self._reader.warnings)
+            self._reader.warnings.clear()
+        drained, self._warnings = self._warnings, []
+        return drained
+
+
+class ArraySource:
+    """RGB uint8 frames held in memory, at a constant frame rate."""
+
+    def __init__(self, frames: Sequence[np.ndarray], fps: float = 30.0, name: str = "<frames>") -> None:
+        if not len(frames):
+            raise InputError(f"{name}: no frames")
+        self._frames = frames
+        height, width = frames[0].shape[:2]
+        rate = Fraction(fps).limit_denominator(1001)
+        self.info = video_io.VideoInfo(path=Path(name), width=width, height=height, fps=rate,
+                                       frame_count=len(frames), duration_s=len(frames) / float(rate), rotation=0,
+                                       has_audio=False, codec="raw", time_base=1 / rate)
+
+    def frames(self) -> Iterator[video_io.Frame]:
+        for index, rgb in enumerate(self._frames):
+            yield video_io.Frame(index=index, pts=index, time_s=index / float(self.info.fps), rgb=rgb)
+
+    def drain_warnings(self) -> list[str]:
+        return []
+
+
+@contextmanager
+def one_pass(source: FrameSource) -> Iterator[Iterator[video_io.Frame]]:
+    """A pass over the source that is closed however the loop ends."""
+    frames = source.frames()
+    try:
+        yield frames
+    finally:
+        close = getattr(frames, "close", None)
+        if close is not None:
+            close()
