@@ -12,13 +12,17 @@ with T = 0; the region's pixels next to them enter the band. The head of the ban
 its 4-neighbours get T from the upwind discretisation of |grad T| = 1 using only frozen neighbours:
 with a, b the smaller frozen T along x and along y (a <= b),
     T = (a + b + sqrt(2 - (a - b)^2)) / 2   if b - a < 1,   else a + 1,
-which is the smallest of Telea's four quadrant solutions. T approximates the Euclidean distance to the
-nearest known pixel centre: exact for straight axis-aligned fronts, slightly too large where the front
-spreads from a corner (first-order scheme; about 7 % at worst on the test shapes, see tests/test_fmm.py).
+which is the smallest of Telea's four quadrant solutions. Each missing pixel is frozen once, in
+non-decreasing T, and that is the order in which it is filled. T approximates the Euclidean distance to
+the nearest known pixel centre (first-order scheme): exact behind straight axis-aligned fronts; a pixel
+with two orthogonal known neighbours gets 0.71 instead of 1 (-29 %), one diagonal to a lone front pixel
+1.71 instead of 1.41 (+21 %); mean errors on the test shapes are 0.02-0.11 px (tests/test_fmm.py).
 The heap is a binary heap on flat arrays with lazy deletion (a pixel whose T drops is pushed again; the
-stale entry is skipped when popped): about 2x faster than numba's ``heapq`` on a typed list of tuples.
+stale entry is skipped when popped): 1.5x faster here than numba's ``heapq`` on a list of tuples, and
+as fast as an indexed heap with decrease-key, which needs more code.
 
-Pixels that are neither known nor in the region are walls: never entered, never used.
+Pixels that are neither known nor in the region are walls: never entered, never used. Only the
+bounding box of the region grown by radius + 1 is processed (crop, then paste back); the crop is exact.
 
 Weights (eq. 24)
 ----------------
@@ -28,17 +32,25 @@ that already have a flow (known, or filled earlier in the marching order), with
     w(p, q) = 1 / |p - q|  *  1 / (||I'(p + F(q)) - I'(q + F(q))||_2 + eps)
 
 I' is the neighbour frame (RGB, 0..255, bilinear). q + F(q) is q's match in the neighbour; p + F(q) is
-where p's match would be if p moved like q, so the colour factor is large when "p moves like q" is
-consistent with the neighbour's colours. When either sample falls outside the neighbour's valid area
-(any bilinear tap with non-zero weight invalid or off-image), that pair keeps the distance factor only
-(colour factor 1, the same as a perfect colour match at the default eps = 1). ``use_colour=False``
-drops the colour factor everywhere.
+where p's match would be if p moved like q, so the colour factor is large when "p moves like q" agrees
+with the neighbour's colours. A sample is usable when its whole 2x2 bilinear footprint lies on the
+image and in the neighbour's valid area; when either sample of a pair is not, that pair keeps the
+distance factor alone (colour factor 1, which is a perfect colour match at the default eps = 1).
+``use_colour=False`` drops the colour factor everywhere.
 
-Telea's direction term (p - q) . grad T and level-set term are left out: both favour q straight
-"upstream" of p, which for flow only strengthens a straight extrusion across object boundaries, while
-the colour factor is what should decide which neighbours' motion p shares. Eq. 24 has no gradient
-term either (Telea's eq. 7 has), so the fill is a zero-order extension: a smooth field's slope across
-the hole is not continued (an affine field with gradient g px/px drifts by about g px per px of depth).
+The geometric factor is Telea's distance term in its milder form 1/|p - q| (1/|p - q|^2 measured the
+same on the tests). Telea's direction term (p - q) . grad T and level-set term are left out: both
+favour q straight "upstream" of p, which for flow only strengthens a straight extrusion across object
+boundaries, while the colour factor is what should decide whose motion p shares.
+
+Limits (measured on the scenes of tests/test_fmm.py): eq. 24 has no gradient term (Telea's eq. 7 has), so the fill is a
+zero-order extension: an affine field of slope g px/px drifts by up to g (T + 2) px at depth T. Colour
+steering across the front (a boundary slanted to the marching direction) works when each object's
+colour is nearly uniform: 1/(d + 1) gives a same-coloured neighbour at most ~200x the weight of one
+across a strong colour edge (less as soon as the object has texture), a pixel on the slant has few
+same-coloured predecessors, and the small mixing compounds row after row. With flat colours a
+0.5 px/row slant is followed for 60 rows (93 % of the wedge right); with +-2 grey levels of shading on
+the objects that drops to 33-46 %, with +-5 to 7 %.
 """
 
 from __future__ import annotations
@@ -176,10 +188,10 @@ def _march(state: np.ndarray, arrival: np.ndarray) -> np.ndarray:
     visits = np.empty(n_inside, np.int64)
     n_visited = 0
     while size > 0:
-        t, flat, size = _heap_pop(keys, items, size)
+        _, flat, size = _heap_pop(keys, items, size)
         y, x = flat // w, flat % w
-        if state[y, x] == _KNOWN or t > arrival[y, x]:
-            continue  # stale entry: already frozen, or pushed again with a smaller T
+        if state[y, x] == _KNOWN:
+            continue  # stale entry: T dropped and the pixel was pushed again, then frozen at the smaller T
         state[y, x] = _KNOWN
         visits[n_visited] = flat
         n_visited += 1
@@ -348,8 +360,9 @@ def _region_box(known: np.ndarray, region: np.ndarray | None, margin: int) -> tu
 
 def _march_box(known: np.ndarray, region: np.ndarray | None, box: tuple[slice, slice]) -> tuple[np.ndarray, np.ndarray]:
     """FMM on the crop: (arrival float64, inf where unreached; flat crop indices in visiting order)."""
-    crop_known = known[box]
-    state, arrival = _initial_state(crop_known, ~crop_known if region is None else region[box])
+    crop_known = np.ascontiguousarray(known[box])  # one compiled signature whatever the box
+    crop_region = ~crop_known if region is None else np.ascontiguousarray(region[box])
+    state, arrival = _initial_state(crop_known, crop_region)
     return arrival, _march(state, arrival)
 
 
