@@ -198,3 +198,26 @@ def test_demo_runs_and_checks_itself_against_the_ground_truth(tmp_path, capsys, 
     assert "median corner error" in printed
     assert (tmp_path / "demo" / "demo_stabilized_crop.mp4").is_file()
     assert (tmp_path / "recordings" / "demo.rrd").is_file()
+
+
+def test_full_mode_records_every_completion_intermediate(shaky, tmp_path):
+    path, video = shaky
+    rrd = tmp_path / "full.rrd"
+    collector = StageCollector("completion")
+    out = tmp_path / "full.mp4"
+    stabilize(path, out, StabilizeConfig(mode="full"), observer=Observers(RerunRecorder(rrd, level="full"), collector))
+    recording = Recording.load(rrd)
+    n = video.n_frames
+    for entity in (ent.COMPLETION_FRAME, ent.COMPLETION_VARIANCE, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY,
+                   ent.COMPLETION_FALLBACK, f"{ent.COMPLETION_STATS}/missing"):
+        assert recording.rows(entity) == n, entity
+        assert recording.timelines(entity) == {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}
+    with_fills = sum(1 for _, result in collector.results["completion"] if result.fills)
+    for entity in (ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FMM_ORDER, ent.COMPLETION_FMM_ARRIVAL):
+        assert recording.rows(entity) == with_fills, entity
+    # The logged fractions are the pipeline's.
+    _, missing = recording.scalars(f"{ent.COMPLETION_STATS}/missing")
+    np.testing.assert_allclose(missing, [r.missing.mean() for _, r in collector.results["completion"]], atol=1e-12)
+    # Full frame: the output keeps no black border from the missing areas.
+    _, frames = frame_stats(out)
+    assert max(np.mean(np.all(f < 8, axis=2)) for f in frames) < 1e-3
