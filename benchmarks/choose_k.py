@@ -1,8 +1,9 @@
 """Choose the default smoothing radius k from the real clips (README, "Choosing k").
 
-For each clip: one motion pass, then for each k the smoothed path's residual jitter (the same
-high-pass measure as pipeline.metrics: RMS of the path minus its Gaussian low-pass with sigma = fps/2
-frames) and the crop it costs (area kept by the largest window valid in every frame).
+For each clip: one motion pass, then for each k the residual jitter the output would have, measured
+exactly as pipeline.metrics measures a video (its trajectory() and residual_jitter() applied to the
+output's inter-frame motion stab_t <- stab_(t-1) = S_t^-1 T_t S_(t-1)), and the crop it costs (area kept
+by the largest window valid in every frame).
 Usage: python benchmarks/choose_k.py [--radii 0,6,15] [CLIPS...]   (default: every clip in ../shared/videos)
 With --radii 0 it measures a video's own residual jitter, e.g. a peer's output, on the same scale.
 """
@@ -13,19 +14,19 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
-
-from pipeline import motion, smoothing, stabilize, video_io, warping
+from pipeline import metrics, motion, smoothing, stabilize, video_io, warping
 from pipeline.observer import NullObserver, null_progress
 from pipeline.source import FileSource
 
-RADII = (0, 4, 6, 10, 15, 20, 30, 45)
+RADII = (0, 6, 15, 30, 45, 60, 90)
 VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
 
 
-def high_pass_rms(path_xy: np.ndarray, fps: float) -> float:
-    low = gaussian_filter1d(path_xy, sigma=fps / 2.0, axis=0, mode="nearest")
-    return float(np.sqrt(np.mean(np.sum((path_xy - low) ** 2, axis=1))))
+def output_jitter(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, width: int, height: int, fps: float) -> float:
+    """Residual jitter (px) of the stabilized video, predicted from the transforms, measured like metrics does."""
+    stab_from_orig = np.linalg.inv(orig_from_stab)
+    steps = [stab_from_orig[t] @ curr_from_prev[t] @ orig_from_stab[t - 1] for t in range(1, len(curr_from_prev))]
+    return metrics.residual_jitter(metrics.trajectory(steps, width, height), fps)[0]
 
 
 def main(argv: list[str]) -> int:
@@ -43,7 +44,7 @@ def main(argv: list[str]) -> int:
         for k in radii:
             result = smoothing.smooth(passed.curr_from_prev, smoothing.SmoothingConfig(radius=k), cuts=passed.cuts,
                                       width=info.width, height=info.height)
-            jitter = high_pass_rms(result.smoothed_trajectory[:, :2], float(info.fps))
+            jitter = output_jitter(passed.curr_from_prev, result.orig_from_stab, info.width, info.height, float(info.fps))
             window = warping.largest_crop(result.orig_from_stab, info.width, info.height)
             row.append((jitter, window.cropping_ratio if window else 0.0))
         table.append(row)

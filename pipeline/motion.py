@@ -178,16 +178,20 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
         matrix, inlier_mask = _fit_model(prev_pts, curr_pts, config, tight=lk_pass > 0)
         inliers = np.zeros(len(prev_pts), bool) if inlier_mask is None else inlier_mask.ravel().astype(bool)
         n_tracked = len(prev_pts) if lk_pass == 0 else result.n_tracked
-        result = _WorkEstimate(curr_from_prev, None, n_tracked=n_tracked, n_inliers=int(inliers.sum()),
-                               prev_points=prev_pts, curr_points=curr_pts, inliers=inliers)
+        candidate = _WorkEstimate(curr_from_prev, None, n_tracked=n_tracked, n_inliers=int(inliers.sum()),
+                                  prev_points=prev_pts, curr_points=curr_pts, inliers=inliers)
         if matrix is None or not np.all(np.isfinite(matrix)):
-            result.failure = "model fit failed"
-            return result
-        curr_from_prev = geometry.to_3x3(matrix)
-        result.curr_from_prev = curr_from_prev
-        if result.n_inliers < config.min_inliers or result.n_inliers < config.min_inlier_ratio * n_tracked:
-            result.failure = f"too few inliers ({result.n_inliers} of {n_tracked})"
-            return result
+            candidate.failure = "model fit failed"
+        elif candidate.n_inliers < config.min_inliers or candidate.n_inliers < config.min_inlier_ratio * n_tracked:
+            candidate.failure = f"too few inliers ({candidate.n_inliers} of {n_tracked})"
+        else:
+            candidate.curr_from_prev = geometry.to_3x3(matrix)
+        if candidate.failure is not None:
+            if lk_pass > 0:
+                break  # refinement only ever improves an accepted estimate: keep pass 1's
+            return candidate
+        result = candidate
+        curr_from_prev = result.curr_from_prev
     inl = result.inliers
     projected = geometry.apply(result.curr_from_prev, result.prev_points[inl])
     result.residual_px = float(np.sqrt(np.mean(np.sum((projected - result.curr_points[inl]) ** 2, axis=1))))
