@@ -72,6 +72,9 @@ class LocalFlowConfig:
     lk_levels: int = 3
     lk_max_fb_error_px: float = 0.5  # tracks that do not come back to their start are dropped
     common_erosion_px: int = 3  # flow within this distance of an invalid pixel is unreliable
+    # Forward-backward check: a flow whose way back misses its start by more than this is not trusted
+    # (occlusions, content leaving the neighbour's view); None skips the check (and the backward flow).
+    fb_max_error_px: float | None = 1.0
     min_common_fraction: float = 0.01  # less common area than this (of the frame): no alignment error
 
     def __post_init__(self) -> None:
@@ -85,6 +88,9 @@ class LocalFlowConfig:
 class LocalFlowResult:
     flow: np.ndarray  # (H, W, 2) float32 target -> neighbour: neighbour(p + flow(p)) ~ target(p); valid on `common`
     common: np.ndarray  # (H, W) bool: valid in both images, eroded by common_erosion_px
+    # (H, W) bool: common pixels whose flow is trusted: it lands on the neighbour's content and (with the
+    # forward-backward check) comes back to its start. None: same as common.
+    reliable: np.ndarray | None = None
 
 
 def alignment_error(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarray, neighbour_valid: np.ndarray,
@@ -129,13 +135,43 @@ def local_flow(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarr
     either = target_valid | neighbour_valid
     first, second = (fill_invalid(np.where(target_valid, first, second), either),
                      fill_invalid(np.where(neighbour_valid, second, first), either))
+    flow = _flow(first, second, common, config)
+    reliable = common & _lands_inside(flow, neighbour_valid)
+    if config.fb_max_error_px is not None:
+        backward = _flow(second, first, common, config)
+        reliable &= _round_trip_error(flow, backward) <= config.fb_max_error_px
+    return LocalFlowResult(flow=flow, common=common, reliable=reliable)
+
+
+def _flow(first: np.ndarray, second: np.ndarray, common: np.ndarray, config: LocalFlowConfig) -> np.ndarray:
     if config.method == "dis":
         flow = _dis(first, second, config)
     elif config.method == "farneback":
         flow = _farneback(first, second, config)
     else:
         flow = _sparse_lk(first, second, common, config)
-    return LocalFlowResult(flow=flow.astype(np.float32, copy=False), common=common)
+    return flow.astype(np.float32, copy=False)
+
+
+def _sample_maps(flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    height, width = flow.shape[:2]
+    grid_x, grid_y = np.meshgrid(np.arange(width, dtype=np.float32), np.arange(height, dtype=np.float32))
+    return grid_x + flow[..., 0], grid_y + flow[..., 1]
+
+
+def _lands_inside(flow: np.ndarray, neighbour_valid: np.ndarray) -> np.ndarray:
+    """Pixels whose flow lands where every bilinear tap is neighbour content (else the flow was invented)."""
+    map_x, map_y = _sample_maps(flow)
+    coverage = cv2.remap(neighbour_valid.astype(np.uint8) * 255, map_x, map_y, cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT)
+    return coverage == 255
+
+
+def _round_trip_error(forward: np.ndarray, backward: np.ndarray) -> np.ndarray:
+    """|F(p) + B(p + F(p))|: how far from p the way there and back ends."""
+    map_x, map_y = _sample_maps(forward)
+    back = cv2.remap(backward, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return np.hypot(forward[..., 0] + back[..., 0], forward[..., 1] + back[..., 1])
 
 
 def fill_invalid(grey: np.ndarray, valid: np.ndarray) -> np.ndarray:
