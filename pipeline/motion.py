@@ -22,6 +22,7 @@ from pipeline import geometry
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
+RANSAC_SEED = 0x5EED
 MOTION_MODELS: tuple[str, ...] = ("affine", "similarity", "homography")
 REFINEMENTS: tuple[str, ...] = ("none", "ecc")
 
@@ -101,7 +102,12 @@ def prepare(rgb: np.ndarray, config: MotionConfig) -> PreparedFrame:
 
 
 def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> MotionEstimate:
-    """curr_from_prev between two prepared frames, or the identity with a reason."""
+    """curr_from_prev between two prepared frames, or the identity with a reason.
+
+    Deterministic: RANSAC draws from OpenCV's global RNG, reseeded here so that an estimate does not
+    depend on what ran before it in the process (a segment run must equal a whole-video run).
+    """
+    cv2.setRNGSeed(RANSAC_SEED)
     hist_distance = float(cv2.compareHist(prev.hist, curr.hist, cv2.HISTCMP_BHATTACHARYYA))
     work = _track_and_fit(prev.gray, curr.gray, config)
     if config.refine == "ecc":

