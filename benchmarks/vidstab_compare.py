@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from pipeline import metrics
+from pipeline.errors import FFVizError
 
 VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
 COLUMNS = ("jitter_px", "stab_T", "stab_R", "crop", "distort", "black", "seconds")
@@ -40,6 +41,7 @@ def run_vidstab(clip: Path, out: Path, work: Path) -> float:
                     f"format=yuv420p,vidstabdetect=result={transforms}", "-f", "null", "-"], check=True)
     subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-vf",
                     f"format=yuv420p,vidstabtransform=input={transforms},format=yuv420p",
+                    "-fps_mode", "passthrough",  # one output frame per input frame, input timestamps
                     "-c:v", "libx264", "-crf", "18", "-c:a", "copy", str(out)], check=True)
     return time.perf_counter() - started
 
@@ -80,20 +82,23 @@ def main(argv: list[str]) -> int:
         own = metrics.video_motion_stats(clip)
         per_clip["input"] = dict(jitter_px=own.residual_jitter_px, stab_T=own.stability_translation,
                                  stab_R=own.stability_rotation)
-        for mode in args.modes.split(","):
-            out = work / f"{clip.stem}.ffviz-{mode}.mp4"
-            seconds = run_ffviz(clip, out, mode)
-            per_clip[f"ffviz {mode}"] = row(metrics.compare(clip, out), seconds)
+        runs = [(f"ffviz {mode}", work / f"{clip.stem}.ffviz-{mode}.mp4", lambda c, o, m=mode: run_ffviz(c, o, m))
+                for mode in args.modes.split(",")]
         if have_vidstab:
-            out = work / f"{clip.stem}.vidstab.mp4"
-            seconds = run_vidstab(clip, out, work)
-            per_clip["vidstab"] = row(metrics.compare(clip, out), seconds)
+            runs.append(("vidstab", work / f"{clip.stem}.vidstab.mp4", lambda c, o: run_vidstab(c, o, work)))
+        for method, out, run in runs:
+            try:
+                seconds = run(clip, out)
+                per_clip[method] = row(metrics.compare(clip, out), seconds)
+            except (subprocess.CalledProcessError, FFVizError) as error:  # one failure must not end the table
+                print(f"{clip.name}: {method} failed: {error}", file=sys.stderr)
+                per_clip[method] = {}
         for method, values in per_clip.items():
             line = format_row(clip.name, method, values)
             lines.append(line)
             print(line, flush=True)
         first_ffviz = per_clip[f"ffviz {args.modes.split(',')[0]}"]
-        if "vidstab" in per_clip and first_ffviz["jitter_px"] < per_clip["vidstab"]["jitter_px"]:
+        if per_clip.get("vidstab") and first_ffviz and first_ffviz["jitter_px"] < per_clip["vidstab"]["jitter_px"]:
             wins += 1
         results[clip.name] = per_clip
     if have_vidstab:
