@@ -39,6 +39,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from scipy import ndimage
+
 from pipeline import fallback, fmm, local_flow, mosaic, smoothing, warping
 
 # What filled each pixel (CompletionResult.source).
@@ -50,10 +52,19 @@ NEAR_MISSING_PX = 12  # motion inpainting works within this distance of the miss
 @dataclass(frozen=True)
 class CompletionConfig:
     radius: int = 6  # neighbours t-r..t+r take part (mosaic and local warp)
-    max_warp_neighbours: int = 6  # local flow is computed for at most this many neighbours
+    max_warp_neighbours: int = 4  # local flow is computed for at most this many neighbours
     votes: int = 4  # neighbours are added until each pixel to fill has this many local-warp candidates
     agreement: float = 12.0  # two local-warp candidates agree when their intensities differ by less (0..255)
     moving_px: float = 2.0  # a mosaic pixel is re-examined where agreeing candidates move more than this
+    agreement_window: int = 1  # agreement is judged on the mean difference over this window (px, odd)
+    static_votes: bool = False  # neighbours' plain samples vote for candidates that hardly move
+    residual_radius: int = 4  # local alignment error window (px)
+    choice: str = "residual"  # "support" (ties: residual) | "residual" | "priority" (support, ties: priority)
+    residual_weight: float = 0.0  # with "support": score = support - weight * residual
+    static_rule: str = "median"
+    static_margin: float = 5.0
+    motion_evidence: bool = False
+    flow_fill: str = "neighbour"
     priority: str = "time"  # "time" (nearest first, eq. 23 breaking ties) | "alignment" (eq. 23 alone)
     mosaic: mosaic.MosaicConfig = field(default_factory=mosaic.MosaicConfig)
     flow: local_flow.LocalFlowConfig = field(default_factory=local_flow.LocalFlowConfig)
@@ -121,15 +132,19 @@ def warp_neighbours(frames: dict[int, np.ndarray], t: int, curr_from_prev: np.nd
 
 @dataclass
 class _Candidates:
-    """Local-warp samples of the pixels to fill (flat indices ``index``), one row per computed neighbour."""
+    """Local-warp samples inside the bounding box of the pixels to fill, one entry per computed neighbour."""
 
-    index: np.ndarray  # (m,) flat pixel indices
-    colours: list[np.ndarray]  # (m, 3) uint8 each
-    reached: list[np.ndarray]  # (m,) bool each
-    motion: list[np.ndarray]  # (m,) float32 each: |F| at the pixel
+    box: tuple[slice, slice]
+    to_fill: np.ndarray  # (h, w) bool, the box's pixels to fill
+    nearest_known: tuple[np.ndarray, np.ndarray]  # (h, w) row, column of each pixel's nearest known pixel
+    sources: list[int] = field(default_factory=list)  # index of the neighbour behind each entry
+    colours: list[np.ndarray] = field(default_factory=list)  # (h, w, 3) uint8
+    reached: list[np.ndarray] = field(default_factory=list)  # (h, w) bool: the warp landed on neighbour content
+    motion: list[np.ndarray] = field(default_factory=list)  # (h, w) float32: |F|
+    residual: list[np.ndarray] = field(default_factory=list)  # (h, w) float32: local alignment error after the warp
 
     def count(self) -> np.ndarray:
-        return np.sum(self.reached, axis=0) if self.reached else np.zeros(len(self.index), np.int64)
+        return np.sum(self.reached, axis=0) if self.reached else np.zeros(self.to_fill.shape, np.int64)
 
 
 def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
@@ -150,59 +165,101 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
     order = _priority(neighbours, errors, config.priority)
     fills: list[NeighbourFill] = []
     # Candidates for every missing pixel: the remaining ones need them, the mosaic's are checked against them.
-    to_fill = missing if config.moving_px > 0 else remaining
-    candidates = _Candidates(np.flatnonzero(to_fill), [], [], [])
-    rem_at = remaining.ravel()[candidates.index]
-    near_missing = cv2.dilate(missing.astype(np.uint8), np.ones((NEAR_MISSING_PX * 2 + 1,) * 2, np.uint8)) > 0
-    if rem_at.any() or (config.moving_px > 0 and _motion_touches(target, known, missing, neighbours)):
+    check_mosaic = config.moving_px > 0 and _motion_touches(target, known, missing, neighbours)
+    to_fill = missing if check_mosaic else remaining
+    box = _bounding_box(to_fill, NEAR_MISSING_PX)
+    if box is not None and (remaining.any() or check_mosaic):
+        _, nearest = ndimage.distance_transform_edt(missing[box], return_indices=True)
+        candidates = _Candidates(box, to_fill[box], (nearest[0], nearest[1]))
+        near_missing = cv2.dilate(missing.astype(np.uint8), np.ones((NEAR_MISSING_PX * 2 + 1,) * 2, np.uint8)) > 0
         for i in order:
             if len(fills) >= config.max_warp_neighbours:
                 break
-            need = rem_at & (candidates.count() < config.votes)
-            if len(fills) >= config.votes and not need.any():
-                break  # enough evidence everywhere
             neighbour = neighbours[i]
+            if len(fills) >= config.votes:
+                # Enough candidates: further neighbours only for remaining pixels nothing has reached yet.
+                unreached = remaining[box] & (candidates.count() == 0)
+                if not unreached.any():
+                    break
+                if not (unreached & neighbour.valid[box]).any():
+                    continue
             if not np.isfinite(errors[i]):
                 continue  # no overlap to measure flow on
-            flow = local_flow.local_flow(target, known, neighbour.rgb, neighbour.valid, config.flow)
-            # Propagate over everything not known near the hole: the common area is eroded, so the band
+            if config.flow_fill == "mosaic":
+                flow = local_flow.local_flow(target, known, neighbour.rgb, neighbour.valid, config.flow,
+                                             target_fill=mosaic_result.frame, target_fill_valid=mosaic_result.accepted)
+            elif config.flow_fill == "smooth":
+                flow = local_flow.local_flow(target, known, neighbour.rgb, neighbour.valid, config.flow,
+                                             target_fill=target, target_fill_valid=known)
+            else:
+                flow = local_flow.local_flow(target, known, neighbour.rgb, neighbour.valid, config.flow)
+            # Propagate over everything not trusted near the hole: the common area is eroded, so the band
             # between it and the missing area must be crossed too.
             trusted = flow.common if flow.reliable is None else flow.reliable
             region = ~trusted & near_missing
             inpainted = fmm.inpaint_motion(flow.flow, trusted, neighbour.rgb, neighbour_valid=neighbour.valid,
                                            region=region, config=config.inpaint)
-            colours, reached, motion = _local_warp(inpainted, neighbour, candidates.index)
+            colours, reached, motion = _local_warp(inpainted, neighbour, box)
+            candidates.sources.append(i)
             candidates.colours.append(colours)
-            candidates.reached.append(reached)
+            candidates.reached.append(reached & candidates.to_fill)
             candidates.motion.append(motion)
+            candidates.residual.append(_local_residual(target[box], known[box], colours, reached,
+                                                       candidates.nearest_known, config))
             reached_image = np.zeros((height, width), bool)
-            reached_image.ravel()[candidates.index] = reached
+            reached_image[box] = candidates.reached[-1]
             fills.append(NeighbourFill(neighbour.offset, errors[i], flow, inpainted, np.zeros((height, width), bool),
                                        reached_image))
 
-    if fills:
-        chosen, support = _choose(candidates, config.agreement)
-        has = chosen >= 0
-        take = rem_at & has
-        if config.moving_px > 0:
-            take |= _mosaic_contradicted(candidates, chosen, support, frame.reshape(-1, 3)[candidates.index],
-                                         mosaic_result.accepted.ravel()[candidates.index], config)
-        flat = candidates.index[take]
-        which = chosen[take]
-        colours = np.stack(candidates.colours)  # (k, m, 3)
-        frame.reshape(-1, 3)[flat] = colours[which, np.flatnonzero(take)]
-        corrected.ravel()[flat] = mosaic_result.accepted.ravel()[flat]
-        remaining.ravel()[flat] = False
-        source.ravel()[flat] = SOURCE_LOCAL_WARP
-        for k, fill in enumerate(fills):
-            fill.filled.ravel()[flat[which == k]] = True
-            filled_by.ravel()[flat[which == k]] = fill.offset
+        if fills:
+            static = _static_residual(target[box], known[box], neighbours, box, candidates.nearest_known, config)
+            chosen, support = _choose(candidates, neighbours, static, config)
+            has = chosen >= 0
+            take = remaining[box] & has
+            if check_mosaic:
+                take |= _mosaic_contradicted(candidates, chosen, support, static, frame[box],
+                                             mosaic_result.accepted[box], config)
+            ys, xs = np.nonzero(take)
+            which = chosen[ys, xs]
+            colours = np.stack(candidates.colours)
+            frame[box][ys, xs] = colours[which, ys, xs]
+            take_image = np.zeros((height, width), bool)
+            take_image[box] = take
+            corrected = take_image & mosaic_result.accepted
+            remaining &= ~take_image
+            source[take_image] = SOURCE_LOCAL_WARP
+            for k, fill in enumerate(fills):
+                fill.filled[box][ys[which == k], xs[which == k]] = True
+                filled_by[box][ys[which == k], xs[which == k]] = fill.offset
 
     if remaining.any():
         frame = fallback.smooth_fill(frame, remaining)
     return CompletionResult(frame=frame, missing=missing, mosaic=mosaic_result,
                             neighbour_order=[neighbours[i].offset for i in order], fills=fills, source=source,
                             filled_by=filled_by, fallback=remaining, corrected=corrected)
+
+
+def _bounding_box(mask: np.ndarray, margin: int = 0) -> tuple[slice, slice] | None:
+    rows = np.flatnonzero(mask.any(axis=1))
+    if len(rows) == 0:
+        return None
+    cols = np.flatnonzero(mask.any(axis=0))
+    height, width = mask.shape
+    return (slice(max(int(rows[0]) - margin, 0), min(int(rows[-1]) + 1 + margin, height)),
+            slice(max(int(cols[0]) - margin, 0), min(int(cols[-1]) + 1 + margin, width)))
+
+
+def _local_residual(target: np.ndarray, known: np.ndarray, warped: np.ndarray, reached: np.ndarray,
+                    nearest_known: tuple[np.ndarray, np.ndarray], config: CompletionConfig) -> np.ndarray:
+    """Eq. 23 made local and measured after the local warp: mean |I_t - warped| over the known pixels
+    around each pixel's nearest known pixel (255 where none was reached)."""
+    usable = (known & reached).astype(np.float32)
+    error = np.abs(mosaic.intensity(target) - mosaic.intensity(warped)) * usable
+    size = (2 * config.residual_radius + 1,) * 2
+    total = cv2.boxFilter(error, -1, size, normalize=False)
+    count = cv2.boxFilter(usable, -1, size, normalize=False)
+    local = np.where(count > 0, total / np.maximum(count, 1), np.float32(255))
+    return local[nearest_known]
 
 
 def _priority(neighbours: Sequence[WarpedNeighbour], errors: list[float], rule: str) -> list[int]:
@@ -217,52 +274,102 @@ def _motion_touches(target: np.ndarray, known: np.ndarray, missing: np.ndarray,
     return True
 
 
-def _choose(candidates: _Candidates, agreement: float) -> tuple[np.ndarray, np.ndarray]:
+def _agreement(a: np.ndarray, reached_a: np.ndarray, b: np.ndarray, reached_b: np.ndarray,
+               config: CompletionConfig) -> np.ndarray:
+    """Where two candidate intensity images agree: mean |a - b| over a small window below ``agreement``."""
+    both = (reached_a & reached_b).astype(np.float32)
+    difference = np.abs(a - b) * both
+    if config.agreement_window > 1:
+        size = (config.agreement_window, config.agreement_window)
+        difference = cv2.boxFilter(difference, -1, size, normalize=False)
+        count = cv2.boxFilter(both, -1, size, normalize=False)
+        return (both > 0) & (difference < config.agreement * np.maximum(count, 1))
+    return (both > 0) & (difference < config.agreement)
+
+
+def _choose(candidates: _Candidates, neighbours: Sequence[WarpedNeighbour], static: np.ndarray,
+            config: CompletionConfig) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel, the candidate most others agree with (ties: priority order); -1 where none. Also its support."""
-    reached = np.stack(candidates.reached)  # (k, m)
-    values = mosaic.intensity(np.stack(candidates.colours))  # (k, m)
-    k = len(reached)
+    reached = np.stack(candidates.reached)  # (k, h, w)
+    values = [mosaic.intensity(c) for c in candidates.colours]
+    k = len(values)
     support = np.zeros(reached.shape, np.int32)
     for i in range(k):
         for j in range(i + 1, k):
-            agree = reached[i] & reached[j] & (np.abs(values[i] - values[j]) < agreement)
+            agree = _agreement(values[i], reached[i], values[j], reached[j], config)
             support[i] += agree
             support[j] += agree
-    # Support first; among equals the earlier (higher-priority) neighbour.
-    score = np.where(reached, support * k + (k - 1 - np.arange(k))[:, None], -1)
+    if config.static_votes:
+        # A candidate that hardly moves claims static scene: the other neighbours' plain samples can confirm it.
+        box = candidates.box
+        for i in range(k):
+            static = reached[i] & (candidates.motion[i] <= config.moving_px)
+            for n, neighbour in enumerate(neighbours):
+                if n == candidates.sources[i]:
+                    continue
+                valid = neighbour.valid[box]
+                support[i] += _agreement(values[i], static, mosaic.intensity(neighbour.rgb[box]), valid, config)
+    residual = np.stack(candidates.residual)
+    if config.choice == "priority":
+        # Support first; among equals the earlier (higher-priority) neighbour.
+        score = np.where(reached, support * k + (k - 1 - np.arange(k))[:, None, None], -1)
+    elif config.choice == "residual":
+        # Neighbours computed beyond the first ``votes`` only fill pixels none of those reached.
+        late = (np.arange(k) >= config.votes)[:, None, None] * np.float32(1e4)
+        score = np.where(reached, -residual - late, -np.inf)
+        if config.motion_evidence:
+            # A moving candidate must explain the surroundings clearly better than the static scene does.
+            unproven = (np.stack(candidates.motion) > config.moving_px) & ~(residual + config.static_margin < static)
+            score -= unproven * np.float32(1e3)
+    else:
+        score = np.where(reached, config.residual_weight * support - residual, -np.inf)
     chosen = np.argmax(score, axis=0)
-    columns = np.arange(reached.shape[1])
-    chosen = np.where(reached[chosen, columns], chosen, -1)
-    return chosen, np.where(chosen >= 0, support[np.maximum(chosen, 0), columns], 0)
+    chosen_reached = np.take_along_axis(reached, chosen[None], 0)[0]
+    chosen_support = np.take_along_axis(support, chosen[None], 0)[0]
+    return np.where(chosen_reached, chosen, -1), np.where(chosen_reached, chosen_support, 0)
 
 
-def _mosaic_contradicted(candidates: _Candidates, chosen: np.ndarray, support: np.ndarray, mosaic_colours: np.ndarray,
-                         accepted: np.ndarray, config: CompletionConfig) -> np.ndarray:
-    """Mosaic pixels where agreeing local-warp candidates show moving content that the mosaic does not."""
-    columns = np.arange(len(chosen))
-    safe = np.maximum(chosen, 0)
-    motion = np.stack(candidates.motion)[safe, columns]
-    colour = np.stack(candidates.colours)[safe, columns]
+def _static_residual(target: np.ndarray, known: np.ndarray, neighbours: Sequence[WarpedNeighbour],
+                     box: tuple[slice, slice], nearest_known: tuple[np.ndarray, np.ndarray],
+                     config: CompletionConfig) -> np.ndarray:
+    """Local alignment error of the static hypothesis (no local motion) that the mosaic rests on."""
+    residuals = np.stack([_local_residual(target, known, n.rgb[box], n.valid[box], nearest_known, config)
+                          for n in neighbours])
+    return np.median(residuals, axis=0) if config.static_rule == "median" else residuals.min(axis=0)
+
+
+def _mosaic_contradicted(candidates: _Candidates, chosen: np.ndarray, support: np.ndarray, static: np.ndarray,
+                         mosaic_colours: np.ndarray, accepted: np.ndarray, config: CompletionConfig) -> np.ndarray:
+    """Mosaic pixels where a moving local-warp candidate explains the surroundings clearly better than
+    the static scene the mosaic assumes, and shows something else."""
+    safe = np.maximum(chosen, 0)[None]
+    motion = np.take_along_axis(np.stack(candidates.motion), safe, 0)[0]
+    colour = np.take_along_axis(np.stack(candidates.colours), safe[..., None], 0)[0]
+    residual = np.take_along_axis(np.stack(candidates.residual), safe, 0)[0]
     differs = np.abs(mosaic.intensity(colour) - mosaic.intensity(mosaic_colours)) >= config.agreement
-    return accepted & (chosen >= 0) & (support >= 1) & (motion > config.moving_px) & differs
+    moving = accepted & (chosen >= 0) & (motion > config.moving_px) & differs
+    if config.static_rule == "support":
+        return moving & (support >= 1)
+    return moving & (residual + config.static_margin < static)
 
 
-def _local_warp(inpainted: fmm.MotionInpaintResult, neighbour: WarpedNeighbour, index: np.ndarray,
+def _local_warp(inpainted: fmm.MotionInpaintResult, neighbour: WarpedNeighbour, box: tuple[slice, slice],
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Eq. 25 at the flat pixel indices ``index``: I_t'(p + F(p)), where it lands inside the neighbour.
+    """Eq. 25 over the box: I_t'(p + F(p)) wherever p has a flow that lands inside the neighbour.
 
-    Returns (colours (m, 3) uint8, reached (m,) bool, |F| (m,) float32).
+    Returns (colours (h, w, 3) uint8, reached (h, w) bool, |F| (h, w) float32).
     """
-    width = neighbour.valid.shape[1]
-    flow = inpainted.flow.reshape(-1, 2)[index]
-    has_flow = ~np.isnan(flow[:, 0])
-    flow = np.nan_to_num(flow, nan=-1e6)
-    map_x = (index % width + flow[:, 0]).astype(np.float32).reshape(1, -1)
-    map_y = (index // width + flow[:, 1]).astype(np.float32).reshape(1, -1)
+    rows, cols = box
+    flow = inpainted.flow[box]
+    has_flow = ~np.isnan(flow[..., 0])
+    flow = np.where(has_flow[..., None], flow, np.float32(-1e6))
+    grid_x, grid_y = np.meshgrid(np.arange(cols.start, cols.stop, dtype=np.float32),
+                                 np.arange(rows.start, rows.stop, dtype=np.float32))
+    map_x, map_y = grid_x + flow[..., 0], grid_y + flow[..., 1]
     sampled = cv2.remap(neighbour.rgb, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
     coverage = cv2.remap(neighbour.valid.astype(np.uint8) * 255, map_x, map_y, cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_CONSTANT)
     # Only where every bilinear tap was a valid neighbour pixel: no black bleeding in from its border.
-    reached = has_flow & (coverage.ravel() == 255)
-    motion = np.hypot(flow[:, 0], flow[:, 1]).astype(np.float32)
-    return sampled.reshape(-1, 3), reached, motion
+    reached = has_flow & (coverage == 255)
+    motion = np.where(has_flow, np.hypot(flow[..., 0], flow[..., 1]), np.inf).astype(np.float32)
+    return sampled, reached, motion

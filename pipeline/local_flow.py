@@ -74,7 +74,7 @@ class LocalFlowConfig:
     common_erosion_px: int = 3  # flow within this distance of an invalid pixel is unreliable
     # Forward-backward check: a flow whose way back misses its start by more than this is not trusted
     # (occlusions, content leaving the neighbour's view); None skips the check (and the backward flow).
-    fb_max_error_px: float | None = 1.0
+    fb_max_error_px: float | None = None
     min_common_fraction: float = 0.01  # less common area than this (of the frame): no alignment error
 
     def __post_init__(self) -> None:
@@ -122,8 +122,13 @@ def _mean_abs_difference(target_intensity: np.ndarray, target_valid: np.ndarray,
 
 
 def local_flow(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarray, neighbour_valid: np.ndarray,
-               config: LocalFlowConfig = LocalFlowConfig()) -> LocalFlowResult:
-    """Dense flow from ``target`` to the (already globally warped) ``neighbour`` over their common area."""
+               config: LocalFlowConfig = LocalFlowConfig(), *, target_fill: np.ndarray | None = None,
+               target_fill_valid: np.ndarray | None = None) -> LocalFlowResult:
+    """Dense flow from ``target`` to the (already globally warped) ``neighbour`` over their common area.
+
+    ``target_fill`` (with ``target_fill_valid``): what the target's holes show while the flow is computed,
+    instead of the neighbour's pixels; the rest of the holes is filled smoothly from the target's own pixels.
+    """
     common = target_valid & neighbour_valid
     if config.common_erosion_px > 0:
         size = 2 * config.common_erosion_px + 1
@@ -133,8 +138,12 @@ def local_flow(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarr
     # matching near the boundary honest); holes in both are filled smoothly. See the module docstring.
     first, second = _grey(target), _grey(neighbour)
     either = target_valid | neighbour_valid
-    first, second = (fill_invalid(np.where(target_valid, first, second), either),
-                     fill_invalid(np.where(neighbour_valid, second, first), either))
+    if target_fill is None:
+        first_filled = fill_invalid(np.where(target_valid, first, second), either)
+    else:
+        shown = target_valid | target_fill_valid
+        first_filled = fill_invalid(np.where(target_valid, first, _grey(target_fill)), shown)
+    first, second = first_filled, fill_invalid(np.where(neighbour_valid, second, first), either)
     flow = _flow(first, second, common, config)
     reliable = common & _lands_inside(flow, neighbour_valid)
     if config.fb_max_error_px is not None:
