@@ -1,8 +1,14 @@
-"""Ground-truth evaluation of full-frame completion on synthetic video (used by tests and benchmarks).
+"""Ground-truth evaluation of full-frame completion (used by tests and benchmarks).
 
-The synthetic world is known beyond every input frame, so for the virtual camera the stabilizer
-chose (S_t) the truth of each synthesized pixel is known too. Three fillers are compared on exactly
-the same stabilized frames and missing pixels:
+Two sources of truth for the pixels a full-frame stabilizer has to synthesize:
+
+- synthetic video (``completion_scores``): the world is known beyond every input frame, so for the
+  virtual camera the stabilizer chose (S_t) the truth of each synthesized pixel is rendered exactly;
+- a wide real clip (``crop_completion_scores``): the input is a jittered crop of each wide frame, so the
+  pixels the stabilizer must synthesize outside the crop at time t are the wide frame's own pixels at
+  time t: real parallax, real moving people, real noise, no camera model assumed.
+
+Three fillers are compared on exactly the same stabilized frames and missing pixels:
 
 - ``ours``: the completion chain (mosaic, local flow, motion inpainting, local-warp mosaicing, fallback);
 - ``mosaic+telea``: what OpenCV's videostab offers on a CPU (ConsistentMosaicInpainter followed by
@@ -13,16 +19,22 @@ the same stabilized frames and missing pixels:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable, Sequence
 
 import cv2
 import numpy as np
 
+from pipeline import warping
 from pipeline.observer import NullObserver, Stamp
 from pipeline.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
 from pipeline.synthetic import SyntheticVideo
 
 TELEA_RADIUS = 3.0
+METHODS = ("ours", "mosaic+telea", "telea")
+
+# truth(t, orig_from_out) -> (image the output frame t should show, bool mask where that image is true)
+TruthOf = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass
@@ -38,18 +50,14 @@ class CompletionScores:
         return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
 
 
-METHODS = ("ours", "mosaic+telea", "telea")
-
-
 class _CompletionJudge(NullObserver):
-    """Scores each completed frame against the truth rendered through the same virtual camera."""
+    """Scores each completed frame's synthesized pixels against the truth of the same virtual camera."""
 
-    def __init__(self, video: SyntheticVideo, frames: set[int] | None, config: StabilizeConfig) -> None:
-        self.video = video
+    def __init__(self, truth_of: TruthOf, frames: set[int] | None) -> None:
+        self.truth_of = truth_of
         self.frames = frames
-        self.config = config
         self.scores = CompletionScores()
-        self._warp: dict[int, object] = {}
+        self._warp: dict[int, warping.WarpResult] = {}
 
     def on_stage(self, stage: str, stamp: Stamp | None, result) -> None:
         if stamp is None or (self.frames is not None and stamp.index not in self.frames):
@@ -59,13 +67,12 @@ class _CompletionJudge(NullObserver):
         elif stage == "completion":
             self._score(stamp.index, self._warp.pop(stamp.index), result)
 
-    def _score(self, t: int, warped, completed) -> None:
+    def _score(self, t: int, warped: warping.WarpResult, completed) -> None:
         missing = completed.missing
         if not missing.any():
             return
-        stab_from_orig = np.linalg.inv(warped.orig_from_out)
-        truth = self.video.render_view(t, stab_from_orig)
-        judged = missing & self.video.view_coverage(t, stab_from_orig)
+        truth, covered = self.truth_of(t, warped.orig_from_out)
+        judged = missing & covered
         if not judged.any():
             return
         mosaic_only = completed.mosaic
@@ -82,12 +89,67 @@ class _CompletionJudge(NullObserver):
         self.scores.frames += 1
 
 
-def completion_scores(video: SyntheticVideo, config: StabilizeConfig = StabilizeConfig(),
-                      frames: set[int] | None = None) -> CompletionScores:
-    """Run the real orchestrator in full mode on the synthetic frames and score the synthesized pixels."""
+def _run(frames: Sequence[np.ndarray], fps: float, truth_of: TruthOf, config: StabilizeConfig,
+         scored: set[int] | None) -> CompletionScores:
     if config.mode != "full":
         raise ValueError("completion is evaluated in full mode")
-    judge = _CompletionJudge(video, frames, config)
-    stabilize_source(ArraySource(video.frames, fps=video.config.fps, name="synthetic"), None, config, observer=judge)
+    judge = _CompletionJudge(truth_of, scored)
+    stabilize_source(ArraySource(frames, fps=fps, name="evaluation"), None, config, observer=judge)
     return judge.scores
 
+
+def completion_scores(video: SyntheticVideo, config: StabilizeConfig = StabilizeConfig(),
+                      frames: set[int] | None = None) -> CompletionScores:
+    """Run the real orchestrator in full mode on synthetic frames and score the synthesized pixels."""
+    def truth_of(t: int, orig_from_out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out_from_orig = np.linalg.inv(orig_from_out)
+        return video.render_view(t, out_from_orig), video.view_coverage(t, out_from_orig)
+
+    return _run(video.frames, video.config.fps, truth_of, config, frames)
+
+
+@dataclass(frozen=True)
+class JitteredCrop:
+    """The input made from a wide clip: a (width, height) window whose top-left corner follows the
+    wide frame's centre plus hand-held-like jitter (integer pixels, so input pixels are the wide ones)."""
+
+    corners: np.ndarray  # (N, 2) int: x, y of each crop's top-left corner in its wide frame
+    width: int
+    height: int
+
+    def crops(self, wide: Sequence[np.ndarray]) -> list[np.ndarray]:
+        return [np.ascontiguousarray(w[y:y + self.height, x:x + self.width]) for w, (x, y) in zip(wide, self.corners)]
+
+
+def jittered_crop(n_frames: int, wide_size: tuple[int, int], crop_fraction: float = 0.8, jitter_px: float = 8.0,
+                  seed: int = 0) -> JitteredCrop:
+    """Band-limited jitter (a few frames' correlation, like hand shake) clipped to stay inside the wide frame."""
+    wide_w, wide_h = wide_size
+    width = int(round(wide_w * crop_fraction)) // 2 * 2
+    height = int(round(wide_h * crop_fraction)) // 2 * 2
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal((n_frames + 16, 2))
+    kernel = np.exp(-0.5 * (np.arange(-6, 7) / 2.0) ** 2)
+    smooth = np.stack([np.convolve(noise[:, i], kernel, mode="same") for i in range(2)], axis=1)[8:8 + n_frames]
+    smooth *= jitter_px / max(float(smooth.std()), 1e-9)
+    centre = np.array([(wide_w - width) / 2, (wide_h - height) / 2])
+    corners = np.rint(centre + smooth)
+    corners = np.clip(corners, 0, [wide_w - width, wide_h - height]).astype(int)
+    return JitteredCrop(corners, width, height)
+
+
+def crop_completion_scores(wide: Sequence[np.ndarray], crop: JitteredCrop, fps: float = 30.0,
+                           config: StabilizeConfig = StabilizeConfig(),
+                           frames: set[int] | None = None) -> CompletionScores:
+    """Stabilize jittered crops of a wide clip in full mode; score synthesized pixels against the wide frames."""
+    wide_h, wide_w = wide[0].shape[:2]
+
+    def truth_of(t: int, orig_from_out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x, y = crop.corners[t]
+        wide_from_out = np.array([[1.0, 0, x], [0, 1.0, y], [0, 0, 1]]) @ orig_from_out
+        size = (crop.width, crop.height)
+        truth = warping.warp(wide[t], wide_from_out, size)
+        inside = warping.warp(np.full((wide_h, wide_w), 255, np.uint8), wide_from_out, size) == 255
+        return truth, inside
+
+    return _run(crop.crops(wide), fps, truth_of, config, frames)

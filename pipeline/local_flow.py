@@ -72,10 +72,12 @@ class LocalFlowConfig:
     lk_levels: int = 3
     lk_max_fb_error_px: float = 0.5  # tracks that do not come back to their start are dropped
     common_erosion_px: int = 3  # flow within this distance of an invalid pixel is unreliable
-    # Forward-backward check: a flow whose way back misses its start by more than this is not trusted
-    # (occlusions, content leaving the neighbour's view); None skips the check (and the backward flow).
-    fb_max_error_px: float | None = None
     min_common_fraction: float = 0.01  # less common area than this (of the frame): no alignment error
+    # Large-motion rescue (see the module docstring): inside ``focus``, regions whose warp leaves a mean
+    # intensity error above this (0..255, 5x5 mean) are matched again by a translation search; None: off.
+    rescue_error: float | None = 20.0
+    rescue_search_px: int = 48  # translations up to this far (a best match on the search's edge is dropped)
+    rescue_min_px: int = 40  # smaller badly explained regions are left alone
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -88,8 +90,8 @@ class LocalFlowConfig:
 class LocalFlowResult:
     flow: np.ndarray  # (H, W, 2) float32 target -> neighbour: neighbour(p + flow(p)) ~ target(p); valid on `common`
     common: np.ndarray  # (H, W) bool: valid in both images, eroded by common_erosion_px
-    # (H, W) bool: common pixels whose flow is trusted: it lands on the neighbour's content and (with the
-    # forward-backward check) comes back to its start. None: same as common.
+    # (H, W) bool: common pixels whose flow is trusted: it lands on the neighbour's content (flow that
+    # leaves it was invented by the smoothness prior). None: same as common.
     reliable: np.ndarray | None = None
 
 
@@ -100,7 +102,9 @@ def alignment_error(target: np.ndarray, target_valid: np.ndarray, neighbour: np.
     The thesis sums; the mean is used because a sum grows with the overlap, so it would rank a neighbour
     that shares much of the frame (usually the nearest, most useful one) below one that barely overlaps.
     """
-    return _mean_abs_difference(intensity(target), target_valid, neighbour, neighbour_valid, min_common_fraction)
+    # Every other pixel of every other row: a quarter of the work, the same mean within noise.
+    return _mean_abs_difference(intensity(target[::2, ::2]), target_valid[::2, ::2], neighbour[::2, ::2],
+                                neighbour_valid[::2, ::2], min_common_fraction)
 
 
 def rank_neighbours(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[np.ndarray],
@@ -122,12 +126,11 @@ def _mean_abs_difference(target_intensity: np.ndarray, target_valid: np.ndarray,
 
 
 def local_flow(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarray, neighbour_valid: np.ndarray,
-               config: LocalFlowConfig = LocalFlowConfig(), *, target_fill: np.ndarray | None = None,
-               target_fill_valid: np.ndarray | None = None) -> LocalFlowResult:
+               config: LocalFlowConfig = LocalFlowConfig(), *, focus: np.ndarray | None = None) -> LocalFlowResult:
     """Dense flow from ``target`` to the (already globally warped) ``neighbour`` over their common area.
 
-    ``target_fill`` (with ``target_fill_valid``): what the target's holes show while the flow is computed,
-    instead of the neighbour's pixels; the rest of the holes is filled smoothly from the target's own pixels.
+    ``focus``: where the flow matters most (e.g. around the area to complete); large motions the flow
+    method missed are searched for there (``rescue_error``).
     """
     common = target_valid & neighbour_valid
     if config.common_erosion_px > 0:
@@ -138,17 +141,12 @@ def local_flow(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarr
     # matching near the boundary honest); holes in both are filled smoothly. See the module docstring.
     first, second = _grey(target), _grey(neighbour)
     either = target_valid | neighbour_valid
-    if target_fill is None:
-        first_filled = fill_invalid(np.where(target_valid, first, second), either)
-    else:
-        shown = target_valid | target_fill_valid
-        first_filled = fill_invalid(np.where(target_valid, first, _grey(target_fill)), shown)
-    first, second = first_filled, fill_invalid(np.where(neighbour_valid, second, first), either)
+    first, second = (fill_invalid(np.where(target_valid, first, second), either),
+                     fill_invalid(np.where(neighbour_valid, second, first), either))
     flow = _flow(first, second, common, config)
+    if focus is not None and config.rescue_error is not None:
+        _rescue_large_motions(flow, target, neighbour, neighbour_valid, common & focus, config)
     reliable = common & _lands_inside(flow, neighbour_valid)
-    if config.fb_max_error_px is not None:
-        backward = _flow(second, first, common, config)
-        reliable &= _round_trip_error(flow, backward) <= config.fb_max_error_px
     return LocalFlowResult(flow=flow, common=common, reliable=reliable)
 
 
@@ -176,11 +174,63 @@ def _lands_inside(flow: np.ndarray, neighbour_valid: np.ndarray) -> np.ndarray:
     return coverage == 255
 
 
-def _round_trip_error(forward: np.ndarray, backward: np.ndarray) -> np.ndarray:
-    """|F(p) + B(p + F(p))|: how far from p the way there and back ends."""
-    map_x, map_y = _sample_maps(forward)
-    back = cv2.remap(backward, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return np.hypot(forward[..., 0] + back[..., 0], forward[..., 1] + back[..., 1])
+def _warp_error(target: np.ndarray, neighbour: np.ndarray, flow: np.ndarray, origin: tuple[int, int]) -> np.ndarray:
+    """5x5 mean of |I_t(p) - I_t'(p + F(p))| for a crop of the target whose top-left pixel is ``origin``."""
+    map_x, map_y = _sample_maps(flow)
+    map_x += origin[1]
+    map_y += origin[0]
+    warped = cv2.remap(neighbour, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return cv2.blur(np.abs(intensity(target) - intensity(warped)), (5, 5))
+
+
+def _rescue_large_motions(flow: np.ndarray, target: np.ndarray, neighbour: np.ndarray, neighbour_valid: np.ndarray,
+                          where: np.ndarray, config: LocalFlowConfig) -> None:
+    """Re-match, by a translation search, the regions of ``where`` that the flow leaves badly explained.
+
+    Each connected badly explained region gets the translation minimising its masked SSD against the
+    neighbour (landing entirely on neighbour content); its pixels that this translation explains at least
+    twice as well as the flow (and below ``rescue_error``) take it. Writes into ``flow``.
+    """
+    rows = np.flatnonzero(where.any(axis=1))
+    if len(rows) == 0:
+        return
+    cols = np.flatnonzero(where.any(axis=0))
+    height, width = where.shape
+    # Work on the focus' box: error maps and warps are only needed there.
+    y0, y1 = max(rows[0] - 2, 0), min(rows[-1] + 3, height)
+    x0, x1 = max(cols[0] - 2, 0), min(cols[-1] + 3, width)
+    box_target, box_flow = target[y0:y1, x0:x1], flow[y0:y1, x0:x1]
+    error = _warp_error(box_target, neighbour, box_flow, (y0, x0))
+    bad = where[y0:y1, x0:x1] & (error > config.rescue_error)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(bad.astype(np.uint8), connectivity=8)
+    search = config.rescue_search_px
+    for label in range(1, count):
+        if stats[label, cv2.CC_STAT_AREA] < config.rescue_min_px:
+            continue
+        bx, by, bw, bh = (int(v) for v in stats[label, :4])
+        region = labels[by:by + bh, bx:bx + bw] == label
+        # The region in frame coordinates, and the neighbour's window it may move to.
+        fy, fx = y0 + by, x0 + bx
+        sy0, sx0 = max(fy - search, 0), max(fx - search, 0)
+        sy1, sx1 = min(fy + bh + search, height), min(fx + bw + search, width)
+        window = neighbour[sy0:sy1, sx0:sx1].astype(np.float32)
+        mask = np.repeat(region[..., None], 3, axis=2).astype(np.float32)
+        cost = cv2.matchTemplate(window, target[fy:fy + bh, fx:fx + bw].astype(np.float32), cv2.TM_SQDIFF, mask=mask)
+        outside = cv2.matchTemplate((~neighbour_valid[sy0:sy1, sx0:sx1]).astype(np.float32),
+                                    region.astype(np.float32), cv2.TM_CCORR)
+        cost[outside > 0.5] = np.inf  # placements touching pixels the neighbour does not have
+        if not np.isfinite(cost).any():
+            continue
+        iy, ix = np.unravel_index(int(np.argmin(cost)), cost.shape)
+        dx, dy = sx0 + ix - fx, sy0 + iy - fy
+        if abs(dx) >= search or abs(dy) >= search:
+            continue  # the best match is on the search's edge: the true one may lie beyond, do not guess
+        translation = np.empty((bh, bw, 2), np.float32)
+        translation[...] = (dx, dy)
+        sub = (slice(by, by + bh), slice(bx, bx + bw))
+        error_after = _warp_error(box_target[sub], neighbour, translation, (fy, fx))
+        better = region & (error_after < 0.5 * error[sub]) & (error_after < config.rescue_error)
+        box_flow[sub][better] = (dx, dy)
 
 
 def fill_invalid(grey: np.ndarray, valid: np.ndarray) -> np.ndarray:

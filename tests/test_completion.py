@@ -1,0 +1,141 @@
+"""Full-frame completion (thesis chapter 4) against ground truth.
+
+The PSNR tests compare, on the same stabilized frames and missing pixels, our chain with the CPU chain
+OpenCV's videostab offers (consistent mosaic + Telea colour inpainting, rebuilt in pipeline/evaluation.py)
+and with plain Telea. Measured when written (640x360 or the clip's size, 48 frames):
+- jittered 80 % crops of linyihaolyh_shaky.mp4 (real parallax, pedestrians): ours 31.4 dB, mosaic+telea 28.4,
+  telea 22.1;
+- synthetic coffee world with a textured object crossing the borders (seeds 1, 2): ours 35.6 / 36.2 dB,
+  mosaic+telea 33.3 / 33.6, telea 20.1 / 19.2.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import cv2
+import numpy as np
+import pytest
+import skimage.data
+
+from pipeline import completion
+from pipeline.evaluation import CompletionScores, completion_scores, crop_completion_scores, jittered_crop
+from pipeline.smoothing import SmoothingConfig
+from pipeline.source import FileSource, one_pass
+from pipeline.stabilize import StabilizeConfig
+from pipeline.synthetic import SyntheticConfig, generate, psnr
+from tests.conftest import real_clip
+
+FULL = StabilizeConfig(mode="full")
+
+
+def _pooled(scores: list[CompletionScores]) -> CompletionScores:
+    pooled = CompletionScores()
+    for s in scores:
+        for method, error in s.squared_error.items():
+            pooled.squared_error[method] += error
+        pooled.pixels += s.pixels
+        pooled.frames += s.frames
+    return pooled
+
+
+def test_beats_the_opencv_cpu_chain_on_jittered_crops_of_a_real_clip():
+    with one_pass(FileSource(real_clip("linyihaolyh_shaky.mp4"))) as frames:
+        wide = [f.rgb for f in itertools.islice(frames, 48)]
+    crop = jittered_crop(len(wide), (wide[0].shape[1], wide[0].shape[0]), crop_fraction=0.8, jitter_px=8.0, seed=1)
+    scores = crop_completion_scores(wide, crop, config=FULL)
+    assert scores.frames > 30 and scores.pixels > 100_000
+    ours = scores.psnr("ours")
+    assert ours >= scores.psnr("mosaic+telea") + 2.0, vars(scores)
+    assert ours >= scores.psnr("telea") + 2.0, vars(scores)
+
+
+def test_beats_the_opencv_cpu_chain_with_a_moving_object_crossing_the_borders():
+    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius=50))
+    runs = []
+    for seed in (1, 2):
+        video = generate(SyntheticConfig(n_frames=48, jitter_px=10.0, object_sweep=1.3, seed=seed, blurred_frames=()))
+        runs.append(completion_scores(video, config))
+    scores = _pooled(runs)
+    assert scores.pixels > 100_000
+    assert scores.psnr("ours") >= scores.psnr("mosaic+telea") + 2.0, vars(scores)
+    assert scores.psnr("ours") >= scores.psnr("telea") + 2.0, vars(scores)
+
+
+def _photo(height: int = 180, width: int = 320) -> np.ndarray:
+    return np.ascontiguousarray(skimage.data.astronaut()[100:100 + height, 60:60 + width])
+
+
+def _neighbours(frames: dict[int, np.ndarray], valid: dict[int, np.ndarray] | None = None,
+                ) -> list[completion.WarpedNeighbour]:
+    """Neighbours already in the target's coordinates (identity global motion)."""
+    shape = next(iter(frames.values())).shape[:2]
+    return [completion.WarpedNeighbour(offset, rgb, np.ones(shape, bool) if valid is None else valid[offset])
+            for offset, rgb in sorted(frames.items(), key=lambda item: abs(item[0]))]
+
+
+def test_nothing_missing_leaves_the_frame_untouched():
+    target = _photo()
+    missing = np.zeros(target.shape[:2], bool)
+    result = completion.complete(target, missing, _neighbours({-1: np.roll(target, 3, axis=1), 1: target}))
+    np.testing.assert_array_equal(result.frame, target)
+    assert (result.source == completion.SOURCE_ORIGINAL).all() and not result.fallback.any()
+
+
+def test_static_border_is_filled_from_the_neighbours_and_only_the_uncovered_corner_falls_back():
+    truth = _photo()
+    missing = np.zeros(truth.shape[:2], bool)
+    missing[:, -30:] = True  # a right border strip, as after stabilization
+    target = truth.copy()
+    target[missing] = 0
+    uncovered = np.zeros_like(missing)
+    uncovered[:20, -30:] = True  # no neighbour sees this corner either
+    valid = {o: ~uncovered for o in (-2, -1, 1, 2)}
+    noisy = {o: np.clip(truth + np.random.default_rng(o + 10).normal(0, 1.0, truth.shape), 0, 255).astype(np.uint8)
+             for o in valid}
+    result = completion.complete(target, missing, _neighbours(noisy, valid))
+    np.testing.assert_array_equal(result.frame[~missing], truth[~missing])
+    np.testing.assert_array_equal(result.fallback, uncovered)
+    covered = missing & ~uncovered
+    assert psnr(result.frame, truth, covered) > 40
+    assert (result.source[covered] != completion.SOURCE_FALLBACK).all()
+    # The corner nobody saw is a smooth continuation, not a black hole.
+    assert result.frame[uncovered].max(axis=1).min() > 0
+    assert np.abs(result.frame[uncovered].astype(int) - truth[uncovered]).mean() < 40
+
+
+def _disc_scene(offset: int, background: np.ndarray, speed: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+    """The background with a textured disc whose centre moves ``speed`` px per frame to the right."""
+    height, width = background.shape[:2]
+    texture = cv2.resize(np.ascontiguousarray(skimage.data.coffee()[100:300, 200:400]), (80, 80))
+    texture = 255 - texture  # never similar to the background
+    cx, cy = 262 + speed * offset, 90
+    patch_from_frame = np.array([[1, 0, 40 - cx], [0, 1, 40 - cy]], np.float64)
+    sprite = cv2.warpAffine(texture, patch_from_frame, (width, height), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+    yy, xx = np.mgrid[0:height, 0:width]
+    inside = (xx - cx) ** 2 + (yy - cy) ** 2 <= 38 ** 2
+    return np.where(inside[..., None], sprite, background), inside
+
+
+def test_moving_object_in_the_missing_area_is_synthesized_not_painted_over_with_background():
+    background = _photo()
+    truth, object_mask = _disc_scene(0, background)
+    missing = np.zeros(truth.shape[:2], bool)
+    missing[:, -40:] = True  # covers the disc's right half
+    target = truth.copy()
+    target[missing] = 0
+    neighbours = {o: _disc_scene(o, background)[0] for o in (-3, -2, -1, 1, 2, 3)}
+    result = completion.complete(target, missing, _neighbours(neighbours))
+    judged = missing & object_mask
+    assert judged.sum() > 800
+    baseline = cv2.inpaint(result.mosaic.frame, result.mosaic.remaining.astype(np.uint8), 3, cv2.INPAINT_TELEA)
+    ours, theirs = psnr(result.frame, truth, judged), psnr(baseline, truth, judged)
+    # No ghost: the object's missing half comes back through its own motion (measured 20.2 vs 12.1 dB).
+    assert ours > theirs + 5.0, (ours, theirs)
+    # Over the whole strip the chain wins too (measured 24.6 vs 20.5 dB) ...
+    assert psnr(result.frame, truth, missing) > psnr(baseline, truth, missing) + 2.0
+    # ... though the object's flow, propagated past its edge, costs the static pixels beside it: measured
+    # 26.6 dB there vs the mosaic's 37.1. Requiring a second neighbour to agree before a moving sample
+    # replaces the mosaic fixes part of that here but lost 0.4-1.6 dB on the benchmark clips, so it is not done.
+    static = missing & ~cv2.dilate(object_mask.astype(np.uint8), np.ones((11, 11), np.uint8)).astype(bool)
+    assert psnr(result.frame, truth, static) > 25
