@@ -1,6 +1,9 @@
-"""The layout a recording opens with: frames side by side, trajectories original vs smoothed, motion, log."""
+"""The layout a recording opens with: frames side by side, completion, stage stepping of the traced frames,
+deblurring, trajectories original vs smoothed, motion, log."""
 
 from __future__ import annotations
+
+from typing import Sequence
 
 import rerun.blueprint as rrb
 
@@ -15,7 +18,42 @@ def _trajectory_view(axis: str, unit: str) -> rrb.TimeSeriesView:
     )
 
 
-def default_blueprint() -> rrb.Blueprint:
+def _stages_tab(traced: Sequence[int]) -> rrb.Container:
+    """One view per traced frame; they step through the stages on the `stage` timeline."""
+    views = [rrb.Spatial2DView(name=f"frame {t}: input -> ... -> output (select timeline 'stage')",
+                               origin=f"/{ent.TRACE}/{t}", contents=[f"/{ent.trace_image(t)}", f"/{ent.trace_label(t)}"])
+             for t in traced]
+    if not views:
+        views = [rrb.TextDocumentView(name="no traced frames", origin=f"/{ent.META}")]
+    return rrb.Grid(*views, name="stages")
+
+
+def _fmm_tab(traced: Sequence[int]) -> rrb.Container:
+    views = [rrb.Spatial2DView(name=f"frame {t}: motion inpainting, Fast Marching band (select timeline 'fmm_step')",
+                               origin=f"/{ent.TRACE}/{t}", contents=[f"/{ent.trace_fmm(t)}", f"/{ent.trace_fmm_label(t)}"])
+             for t in traced]
+    if not views:
+        views = [rrb.TextDocumentView(name="no traced frames", origin=f"/{ent.META}")]
+    return rrb.Grid(*views, name="motion inpainting")
+
+
+def _deblur_tab() -> rrb.Container:
+    return rrb.Vertical(
+        rrb.Horizontal(
+            rrb.Spatial2DView(name="before deblurring", origin="/", contents=[f"/{ent.DEBLUR_BEFORE}"]),
+            rrb.Spatial2DView(name="after deblurring (eq. 30)", origin="/", contents=[f"/{ent.DEBLUR_AFTER}"]),
+            rrb.Spatial2DView(name="share from sharper neighbours (eqs. 30-31)", origin="/", contents=[f"/{ent.DEBLUR_WEIGHTS}"]),
+        ),
+        rrb.Horizontal(
+            rrb.TimeSeriesView(name="relative blurriness b_t (eq. 28)", origin=f"/{ent.DEBLUR_BLURRINESS}"),
+            rrb.TimeSeriesView(name="sharper neighbours used", origin=f"/{ent.DEBLUR_NEIGHBOURS}"),
+        ),
+        name="deblur",
+    )
+
+
+def default_blueprint(traced: Sequence[int] = ()) -> rrb.Blueprint:
+    """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each)."""
     frames = rrb.Horizontal(
         rrb.Spatial2DView(name="input + tracked features", origin="/",
                           contents=[f"/{ent.INPUT_FRAME}", f"/{ent.MOTION_FEATURES}/**"]),
@@ -53,6 +91,9 @@ def default_blueprint() -> rrb.Blueprint:
             rrb.Tabs(
                 rrb.Vertical(frames, name="frames"),
                 completion,
+                _stages_tab(traced),
+                _fmm_tab(traced),
+                _deblur_tab(),
                 rrb.Vertical(trajectories, name="trajectories"),
                 rrb.Vertical(motion, name="motion"),
                 rrb.TextDocumentView(name="about", origin=f"/{ent.META}"),
@@ -60,6 +101,6 @@ def default_blueprint() -> rrb.Blueprint:
             rrb.TextLogView(name="warnings", origin=f"/{ent.LOG}"),
             row_shares=[5, 1],
         ),
-        rrb.TimePanel(state="expanded"),
+        rrb.TimePanel(state="expanded", timeline=ent.FRAME_TIMELINE),
         collapse_panels=True,
     )

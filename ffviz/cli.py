@@ -14,15 +14,17 @@ import traceback
 from pathlib import Path
 from typing import Sequence
 
-from pipeline import motion, smoothing, stabilize as stab
+from pipeline import deblur, motion, smoothing, stabilize as stab
 from pipeline.errors import ConfigError, FFVizError
 from pipeline.observer import Observer, Observers
 
 DEFAULT_RECORDINGS = Path("recordings")
 
 
-class Terminated(Exception):
-    """Raised in the main thread on SIGTERM so the same cleanup as Ctrl-C runs."""
+class Terminated(BaseException):
+    """Raised in the main thread on SIGTERM so the same cleanup as Ctrl-C runs.
+
+    A BaseException, like KeyboardInterrupt, so that no `except Exception` on the way swallows it."""
 
 
 def _on_sigterm(signum, frame) -> None:
@@ -56,13 +58,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--native", action="store_true", help="use the desktop viewer instead of the web viewer")
     p.add_argument("--web-port", type=int, default=9090)
     p.add_argument("--grpc-port", type=int, default=9876)
+
+    p = commands.add_parser("figures", help="render the thesis-style figures from a recording (PNG, PDF or SVG)")
+    p.add_argument("recording", type=Path)
+    p.add_argument("-o", "--output-dir", type=Path, required=True, help="directory to write the figures to")
+    p.add_argument("--format", choices=("png", "pdf", "svg"), default="png", help="(default: %(default)s)")
+    p.add_argument("--frames", type=_frame_list, default=None, metavar="T1,T2,...",
+                   help="frames to show in the frame comparisons (default: the traced frames, else a few spread out)")
+
+    from ffviz.batch import add_parser as add_batch_parser  # imports no Ray: that happens when a batch runs
+
+    add_batch_parser(commands, _add_stabilize_options)
     return parser
 
 
+def _frame_list(text: str) -> tuple[int, ...] | None:
+    from ffviz.trace import parse_frame_list
+
+    try:
+        return parse_frame_list(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None = None) -> None:
-    p.add_argument("--mode", choices=stab.OUTPUT_MODES, default="crop",
-                   help="none: missing areas left black; crop: largest window valid in every frame, "
-                        "scaled back to full size (default: %(default)s)")
+    p.add_argument("--mode", choices=stab.OUTPUT_MODES, default="full",
+                   help="full: missing areas completed from neighbouring frames (full frame, no crop); "
+                        "crop: largest window valid in every frame, scaled back to full size; "
+                        "none: missing areas left black (default: %(default)s)")
     p.add_argument("--smoothing-radius", "-k", type=int, default=smoothing.DEFAULT_RADIUS, metavar="K",
                    help="neighbours on each side in the Gaussian of eq. 18 (default: %(default)s)")
     p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
@@ -70,20 +93,47 @@ def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None 
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine")
     p.add_argument("--refine", choices=motion.REFINEMENTS, default="none",
                    help="ecc: hierarchical coarse-to-fine direct refinement of each estimate (slower)")
+    p.add_argument("--no-deblur", dest="deblur", action="store_false",
+                   help="leave motion-blurred frames as they are (default: sharpen them with the pixels of sharper "
+                        "neighbouring frames, thesis ch. 5)")
+    p.add_argument("--deblur-alpha", type=float, default=deblur.DEBLUR_ALPHA, metavar="ALPHA",
+                   help="eq. 31 sensitivity to the alignment error, in intensity levels 0-255: larger lets "
+                        "less well aligned neighbours contribute more (default: %(default)s)")
     p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=default_rrd, metavar="PATH",
                    help="write a Rerun recording (default place: recordings/<input name>.rrd)")
     p.add_argument("--record", choices=("summary", "full"), default="full",
                    help="recording detail: summary (series, output frames) or full (every intermediate)")
     p.add_argument("--lossless", action="store_true", help="record images losslessly instead of JPEG")
+    p.add_argument("--trace-frames", type=_frame_list, default=None, metavar="T1,T2,...",
+                   help="frames to step through every stage in the recording (timelines 'stage' and 'fmm_step'); "
+                        "'none' for none (default: 3 frames with missing area at --record full, none at summary)")
     p.add_argument("--crf", type=int, default=18, help="x264 quality of the output (lower is better; default: %(default)s)")
 
 
+MAX_RADIUS = 100_000  # frames; the smoothing kernel is allocated at 2k+1 taps
+MIN_SIGMA, MAX_SIGMA = 1e-6, 1e6  # frames
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """What the configs cannot check: values argparse parses but x264 or the kernel cannot use."""
+    if not 0 <= args.crf <= 51:
+        raise ConfigError(f"--crf must be between 0 and 51 (x264's range), not {args.crf}")
+    if args.smoothing_radius > MAX_RADIUS:
+        raise ConfigError(f"-k must be at most {MAX_RADIUS}, not {args.smoothing_radius}")
+    # Outside these the kernel's sigma**2 underflows (0/0) or overflows; the ends already mean none/uniform.
+    if args.smoothing_sigma is not None and not MIN_SIGMA <= args.smoothing_sigma <= MAX_SIGMA:  # False for nan
+        raise ConfigError(f"--smoothing-sigma must be between {MIN_SIGMA:g} and {MAX_SIGMA:g} frames, "
+                          f"not {args.smoothing_sigma}")
+
+
 def _stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
+    _check_options(args)
     try:
         return stab.StabilizeConfig(
             mode=args.mode,
             motion=motion.MotionConfig(model=args.motion_model, refine=args.refine),
             smoothing=smoothing.SmoothingConfig(radius=args.smoothing_radius, sigma=args.smoothing_sigma),
+            deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
         )
     except ValueError as error:  # the configs validate their own values
         raise ConfigError(str(error)) from None
@@ -107,7 +157,8 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
     if rrd_path is not None:
         from ffviz.recorder import RerunRecorder
 
-        recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80)
+        recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80,
+                                 trace_frames=args.trace_frames)
     try:
         report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
                                 progress=tqdm_progress, overwrite=overwrite, crf=args.crf)
@@ -127,11 +178,18 @@ def _print_report(report: stab.StabilizeReport, rrd_path: Path | None) -> None:
     if report.cuts:
         lines.append(f"scene cuts at frames {', '.join(map(str, report.cuts))}")
     if report.warnings:
-        lines.append(f"{len(report.warnings)} warning(s); first: {report.warnings[0][1]}"
-                     + (f" (frame {report.warnings[0][0]})" if report.warnings[0][0] is not None else ""))
+        lines.append(f"{len(report.warnings)} warning(s), listed on stderr")
     if rrd_path is not None:
         lines.append(f"recording: {rrd_path}  (open with: ffviz view {rrd_path})")
     print("\n".join(lines))
+    _print_warnings(report.warnings)
+
+
+def _print_warnings(warnings: Sequence[tuple[int | None, str]], limit: int = 5) -> None:
+    for frame, message in warnings[:limit]:
+        print(f"ffviz: warning: {message}" + (f" (frame {frame})" if frame is not None else ""), file=sys.stderr)
+    if len(warnings) > limit:
+        print(f"ffviz: warning: ... and {len(warnings) - limit} more", file=sys.stderr)
 
 
 def cmd_stabilize(args: argparse.Namespace) -> int:
@@ -173,7 +231,21 @@ def cmd_view(args: argparse.Namespace) -> int:
     return serve(args.recording, web_port=args.web_port, grpc_port=args.grpc_port, native=args.native)
 
 
-COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics, "view": cmd_view}
+def cmd_figures(args: argparse.Namespace) -> int:
+    from ffviz.figures import render_figures
+
+    render_figures(args.recording, args.output_dir, fmt=args.format, frames=args.frames)
+    return 0
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from ffviz.batch import cmd_batch as run_batch
+
+    return run_batch(args, _stabilize_config(args))
+
+
+COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics, "view": cmd_view,
+            "figures": cmd_figures, "batch": cmd_batch}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -34,3 +34,35 @@ COMPLETION_FILLED_BY = "completion/filled_by"
 COMPLETION_FALLBACK = "completion/fallback"
 COMPLETION_FRAME = "completion/frame"
 COMPLETION_STATS = "completion/stats"  # /{missing,mosaic,local_warp,fallback}: fraction of the frame
+
+DEBLUR_BLURRINESS = "deblur/blurriness"  # b_t (eq. 28), every frame
+DEBLUR_NEIGHBOURS = "deblur/neighbours"  # how many sharper neighbours were interpolated from (eq. 30)
+DEBLUR_WEIGHTS = "deblur/weights"  # share of each output pixel from the neighbours (eq. 30), uint8
+DEBLUR_WEIGHTS_SCALE = 255.0  # deblur/weights value of a share of 1
+DEBLUR_BEFORE = "deblur/before"  # frames that were sharpened, before and after (cleared on the others)
+DEBLUR_AFTER = "deblur/after"
+
+# Stage stepping: chosen frames followed through every stage on their own timelines.
+STAGE_TIMELINE = "stage"  # 0..5, index into TRACE_STAGES; rows also carry frame = the traced frame
+FMM_STEP_TIMELINE = "fmm_step"  # 0..steps: the Fast Marching band advancing into the missing area (Fig. 18)
+TRACE = "trace"
+TRACE_STAGES = ("input", "stabilized", "mosaic", "motion-inpainted", "deblurred", "output")
+
+
+def trace_image(frame: int) -> str:
+    """The traced frame's image after each stage (timeline ``stage``)."""
+    return f"{TRACE}/{frame}/image"
+
+
+def trace_label(frame: int) -> str:
+    """Boxes2D framing the image, labelled with the stage's name (timeline ``stage``)."""
+    return f"{TRACE}/{frame}/label"
+
+
+def trace_fmm(frame: int) -> str:
+    """Motion inpainting of the first neighbour's flow, step by step (timeline ``fmm_step``)."""
+    return f"{TRACE}/{frame}/fmm"
+
+
+def trace_fmm_label(frame: int) -> str:
+    return f"{TRACE}/{frame}/fmm_label"

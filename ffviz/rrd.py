@@ -1,15 +1,29 @@
-"""Reading ffviz recordings back (tests, figures): rows per entity, scalar series, images, text."""
+"""Reading ffviz recordings back (tests, figures): rows per entity, scalar series, images, text.
+
+Any timeline can index a query (``frame`` by default; ``stage`` and ``fmm_step`` for traced frames).
+"""
 
 from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
+import cv2
 import numpy as np
+import pyarrow as pa
 from rerun.chunk import RrdReader
+from rerun.encodings import ChannelDatatype, ColorModel
 
 from ffviz import entities as ent
+
+IMAGE_COLUMNS = ("EncodedImage:blob", "Image:buffer", "DepthImage:buffer", "SegmentationImage:buffer")
+_DTYPES = {ChannelDatatype.U8: np.uint8, ChannelDatatype.I8: np.int8, ChannelDatatype.U16: np.uint16,
+           ChannelDatatype.I16: np.int16, ChannelDatatype.U32: np.uint32, ChannelDatatype.I32: np.int32,
+           ChannelDatatype.U64: np.uint64, ChannelDatatype.I64: np.int64, ChannelDatatype.F16: np.float16,
+           ChannelDatatype.F32: np.float32, ChannelDatatype.F64: np.float64}
+_CHANNELS = {ColorModel.L: 1, ColorModel.RGB: 3, ColorModel.BGR: 3, ColorModel.RGBA: 4, ColorModel.BGRA: 4}
 
 
 @dataclass
@@ -69,3 +83,66 @@ class Recording:
         for batch in self.batches.get(entity, []):
             names.update(n for n in batch.schema.names if n in (ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE))
         return names
+
+    # -- any timeline, images --------------------------------------------------------------------
+
+    def _rows(self, entity: str, timeline: str, column: str | None) -> Iterator[tuple[int, pa.RecordBatch, int, str]]:
+        """(time, batch, row, data column) of the rows on ``timeline`` that have ``column`` (default: an image)."""
+        for batch in self.batches.get(entity, []):
+            names = batch.schema.names
+            if timeline not in names:
+                continue
+            columns = [column] if column is not None else [c for c in IMAGE_COLUMNS if c in names]
+            for name in (c for c in columns if c in names):
+                valid = batch.column(name).is_valid().to_numpy(zero_copy_only=False)
+                times = batch.column(timeline).to_numpy(zero_copy_only=False)
+                for row in np.flatnonzero(valid):
+                    yield int(times[row]), batch, int(row), name
+
+    def indices(self, entity: str, timeline: str = ent.FRAME_TIMELINE, column: str | None = None) -> list[int]:
+        """Sorted distinct times on ``timeline`` at which ``entity`` has ``column`` (default: an image)."""
+        return sorted({time for time, *_ in self._rows(entity, timeline, column)})
+
+    def image(self, entity: str, index: int, timeline: str = ent.FRAME_TIMELINE) -> np.ndarray:
+        """The image logged at ``index`` on ``timeline`` (the last one if several), decoded: RGB uint8 for
+        colour images (JPEG or raw), the raw values for depth and segmentation images. KeyError if none."""
+        found = None
+        for time, batch, row, column in self._rows(entity, timeline, None):
+            if time == index:
+                found = (batch, row, column)
+        if found is None:
+            raise KeyError(f"no image at {entity} {timeline}={index}")
+        batch, row, column = found
+        data = _blob(batch.column(column), row)
+        if column == "EncodedImage:blob":
+            image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise ValueError(f"{entity} {timeline}={index}: undecodable image")
+            return cv2.cvtColor(image, cv2.COLOR_BGR2RGB) if image.ndim == 3 else image
+        archetype = column.split(":", 1)[0]
+        fmt = batch.column(f"{archetype}:format")[row].values[0].as_py()
+        dtype = _DTYPES[ChannelDatatype(fmt["channel_datatype"] or ChannelDatatype.U8)]
+        model = ColorModel(fmt["color_model"]) if fmt.get("color_model") else None
+        channels = _CHANNELS.get(model, 1)
+        image = data.view(dtype).reshape((fmt["height"], fmt["width"]) + ((channels,) if channels > 1 else ()))
+        if model in (ColorModel.BGR, ColorModel.BGRA):
+            image = image[..., [2, 1, 0, 3][:channels]]
+        return image.copy()
+
+    def labels(self, entity: str, timeline: str = ent.FRAME_TIMELINE) -> dict[int, str]:
+        """{time: first label} of a Boxes2D/Points2D entity on ``timeline``."""
+        out: dict[int, str] = {}
+        for batch in self.batches.get(entity, []):
+            names = batch.schema.names
+            column = next((c for c in names if c.endswith(":labels")), None)
+            if timeline not in names or column is None:
+                continue
+            for time, value in zip(batch.column(timeline).to_pylist(), batch.column(column).to_pylist()):
+                if value:
+                    out[int(time)] = value[0]
+        return out
+
+
+def _blob(column: pa.Array, row: int) -> np.ndarray:
+    """The bytes of one row of a list<list<uint8>> image column, without a Python list in between."""
+    return column[row].values[0].values.to_numpy(zero_copy_only=False).view(np.uint8)

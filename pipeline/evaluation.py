@@ -18,6 +18,7 @@ Three fillers are compared on exactly the same stabilized frames and missing pix
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -94,6 +95,8 @@ def _run(frames: Sequence[np.ndarray], fps: float, truth_of: TruthOf, config: St
     if config.mode != "full":
         raise ValueError("completion is evaluated in full mode")
     judge = _CompletionJudge(truth_of, scored)
+    # Completion is scored at its own stage, before deblurring: skip the deblurring work.
+    config = dataclasses.replace(config, deblur=dataclasses.replace(config.deblur, enabled=False))
     stabilize_source(ArraySource(frames, fps=fps, name="evaluation"), None, config, observer=judge)
     return judge.scores
 

@@ -15,7 +15,7 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline import completion, motion, smoothing, video_io, warping
+from pipeline import completion, deblur, motion, smoothing, video_io, warping
 from pipeline.source import FileSource, FrameSource, one_pass
 from pipeline.window import sliding_window
 from pipeline.errors import InputError
@@ -31,6 +31,7 @@ class StabilizeConfig:
     motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
     smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
     completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
+    deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
 
     def __post_init__(self) -> None:
         if self.mode not in OUTPUT_MODES:
@@ -70,17 +71,28 @@ class StabilizeReport:
 
 
 def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observer: Observer,
-                    progress: ProgressFactory, total: int | None) -> MotionPass:
+                    progress: ProgressFactory, total: int | None, frames: range | None = None) -> MotionPass:
+    """``frames``: estimate only these (a segment); the pair (start - 1, start) is estimated here, so each
+    segment reads one frame before its range and every pair gets the estimate a whole-video run gives it."""
     transforms: list[np.ndarray] = []
     statuses: list[str] = []
     times: list[float] = []
     warnings: list[tuple[int | None, str]] = []
     bar = progress("pass 1/2: motion", total)
     previous: motion.PreparedFrame | None = None
+    frames_range = frames
     try:
         with one_pass(source) as frames:
             for frame in frames:
+                if frames_range is not None and frame.index >= frames_range.stop:
+                    source.drain_warnings()  # the next segment's
+                    break
                 stamp = Stamp(frame.index, frame.time_s)
+                if frames_range is not None and frame.index < frames_range.start:
+                    source.drain_warnings()  # an earlier segment's
+                    if frame.index == frames_range.start - 1:
+                        previous = motion.prepare(frame.rgb, config)
+                    continue
                 _forward_warnings(source, stamp, observer, warnings)
                 prepared = motion.prepare(frame.rgb, config)
                 if previous is None:
@@ -149,21 +161,23 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
     motion_pass = estimate_motion(source, config.motion, observer=observer, progress=progress,
                                   total=info.frame_count or None)
     n_frames = len(motion_pass.statuses)
+    if n_frames == 1:
+        _warn(motion_pass.warnings, observer, "only one frame: there is no motion to smooth, written as it is")
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
                                 width=info.width, height=info.height)
     observer.on_stage("smoothing", None, smoothed)
     orig_from_out, crop, crop_warning = output_transforms(smoothed.orig_from_stab, config.mode, info.width, info.height)
     warnings = list(motion_pass.warnings)
     if crop_warning:
-        warnings.append((None, crop_warning))
-        observer.on_warning(None, crop_warning)
+        _warn(warnings, observer, crop_warning)
     if crop is not None:
         observer.on_stage("crop", None, crop)
     seconds_motion = time.perf_counter() - started
 
     started = time.perf_counter()
-    _render(source, output_path, motion_pass.curr_from_prev, smoothed, orig_from_out, config,
-            observer=observer, progress=progress, total=n_frames, crf=crf)
+    for message in _render(source, output_path, motion_pass.curr_from_prev, smoothed, orig_from_out, config,
+                           observer=observer, progress=progress, total=n_frames, crf=crf):
+        _warn(warnings, observer, message)
     report = StabilizeReport(
         input_path=info.path, output_path=output_path, n_frames=n_frames, mode=config.mode, crop=crop,
         cuts=motion_pass.cuts, fallbacks=[t for t, s in enumerate(motion_pass.statuses) if s == "fallback"],
@@ -173,13 +187,26 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
     return report
 
 
+def _warn(sink: list[tuple[int | None, str]], observer: Observer, message: str) -> None:
+    sink.append((None, message))
+    observer.on_warning(None, message)
+
+
 def _render(source: FrameSource, output_path: Path | None, curr_from_prev: np.ndarray,
             smoothed: smoothing.SmoothingResult, orig_from_out: np.ndarray, config: StabilizeConfig, *,
-            observer: Observer, progress: ProgressFactory, total: int, crf: int) -> None:
+            observer: Observer, progress: ProgressFactory, total: int, crf: int,
+            frames: range | None = None) -> list[str]:
+    """Pass 2; returns the writer's warnings (odd size padded, timestamps nudged, audio cut short).
+
+    ``frames``: render only these (a segment); the window still reads ``radius`` frames either side of the
+    range, so each frame sees the neighbours it sees in a whole-video run."""
     orig_from_stab = smoothed.orig_from_stab
     full = config.mode == "full"
-    radius = config.completion.radius if full else 0
+    deblurring = config.deblur.enabled and config.deblur.radius > 0
+    radius = max(config.completion.radius if full else 0, config.deblur.radius if deblurring else 0)
+    energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
     segment_of = np.searchsorted(smoothed.segment_starts, np.arange(len(orig_from_stab)), side="right") - 1
+    frames_range = frames
     bar = progress("pass 2/2: warp + complete + encode" if full else "pass 2/2: warp + encode", total)
     info = source.info
     audio_from = info.path if info.has_audio else None
@@ -188,30 +215,49 @@ def _render(source: FrameSource, output_path: Path | None, curr_from_prev: np.nd
         with one_pass(source) as frames:
             for window in sliding_window(frames, radius):
                 frame = window.centre
+                if frames_range is not None and frame.index >= frames_range.stop:
+                    break
+                if frames_range is not None and frame.index < frames_range.start:
+                    continue
                 stamp = Stamp(frame.index, frame.time_s)
                 # Decoding is deterministic, so pass 2 sees pass 1's frames; guard anyway.
                 t = min(frame.index, len(orig_from_stab) - 1)
                 observer.on_stage("input", stamp, frame)
                 stabilized = warping.warp_frame(frame.rgb, orig_from_stab[t])
                 observer.on_stage("warp", stamp, stabilized)
+                # Neighbours from the same shot only: nothing is carried across a scene cut.
+                same_shot = {n.index: n.rgb for n in window.neighbours.values()
+                             if n.index < len(segment_of) and segment_of[n.index] == segment_of[t]}
+                neighbours: list[completion.WarpedNeighbour] = []
                 if full:
-                    # Neighbours from the same shot only: nothing is carried across a scene cut.
-                    same_shot = {n.index: n.rgb for n in window.neighbours.values()
-                                 if n.index < len(segment_of) and segment_of[n.index] == segment_of[t]}
-                    neighbours = completion.warp_neighbours(same_shot, t, curr_from_prev, orig_from_stab[t])
+                    near = {i: rgb for i, rgb in same_shot.items() if abs(i - t) <= config.completion.radius}
+                    neighbours = completion.warp_neighbours(near, t, curr_from_prev, orig_from_stab[t])
                     completed = completion.complete(stabilized.frame, stabilized.missing, neighbours, config.completion)
                     observer.on_stage("completion", stamp, completed)
-                    output = completed.frame
+                    output, output_valid = completed.frame, None
                 elif config.mode == "crop":
-                    output = warping.warp(frame.rgb, orig_from_out[t])
+                    output, output_valid = warping.warp(frame.rgb, orig_from_out[t]), None
                 else:
-                    output = stabilized.frame
+                    output, output_valid = stabilized.frame, ~stabilized.missing
+                if deblurring:
+                    # Last, on the frame as it will be written: in full mode the neighbours completion warped into
+                    # this view are reused (no extra warps), transferred pixels are resampled once, and completed
+                    # pixels are sharpened like the rest (measured +0.06 dB over the frame, +5.7 dB on the completed
+                    # pixels, against deblurring before completion), so the frame stays full; missing pixels of
+                    # --mode none stay missing. Sharpness is compared on the original frames (pipeline/deblur.py).
+                    deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: frame.rgb},
+                                                    curr_from_prev, orig_from_out[t], config.deblur,
+                                                    warped=neighbours, cache=energy_cache)
+                    observer.on_stage("deblur", stamp, deblurred)
+                    output = deblurred.frame
                 observer.on_stage("output", stamp, output)
                 if writer is not None:
                     writer.write(output, pts=frame.pts, time_s=frame.time_s)
                 bar.update()
         if writer is not None:
             writer.close()
+            return writer.warnings
+        return []
     except BaseException:
         if writer is not None:
             writer.abort()

@@ -7,6 +7,7 @@ raised as InputError or OutputError with a one-line message that names the file.
 
 from __future__ import annotations
 
+import heapq
 import os
 import secrets
 from collections.abc import Iterator
@@ -94,11 +95,26 @@ def _checked_input_path(path: str | os.PathLike[str]) -> Path:
     return path
 
 
+def _looks_like_mp4(path: Path) -> bool:
+    """An ISO media file (MP4, MOV, M4A...) starts with one of these boxes."""
+    try:
+        with open(path, "rb") as file:
+            return file.read(8)[4:] in (b"ftyp", b"moov", b"mdat", b"free", b"wide", b"skip")
+    except OSError:
+        return False
+
+
 def _open_input(path: Path) -> av.container.InputContainer:
     try:
-        container = av.open(str(path), "r")
+        # Tags are not always UTF-8 (or are damaged): replace what does not decode rather than fail.
+        container = av.open(str(path), "r", metadata_errors="replace")
     except av.error.InvalidDataError:
+        if _looks_like_mp4(path):
+            # The index (moov box) comes last unless the file was written with faststart.
+            raise InputError(f"damaged or truncated MP4/MOV: its index (moov box) is missing or cut: {path}") from None
         raise InputError(f"not a video file (FFmpeg cannot recognise its format): {path}") from None
+    except av.error.EOFError:
+        raise InputError(f"file ends too early (truncated?): {path}") from None
     except _AV_ERRORS as error:
         raise InputError(f"cannot open {path}: {_reason(error)}") from None
     # FFmpeg's "tty" demuxer turns any text file into an ANSI-art video stream.
@@ -113,6 +129,10 @@ def _video_stream(container: av.container.InputContainer, path: Path) -> av.Vide
     for stream in container.streams.video:
         if not stream.disposition & av.stream.Disposition.attached_pic:
             return stream
+    if container.streams.audio:
+        raise InputError(f"no video stream in {path} (audio only)")
+    if not container.streams:
+        raise InputError(f"no video stream in {path} (no streams at all: empty, damaged or truncated)")
     raise InputError(f"no video stream in {path}")
 
 
@@ -144,33 +164,129 @@ def _upright(rgb: np.ndarray, rotation: int) -> np.ndarray:
     return np.ascontiguousarray(np.rot90(rgb, k=-rotation // 90))
 
 
+class _Pictures:
+    """Decoded pictures in presentation order as (pts, frame), one per video packet.
+
+    A packet that does not decode, or decodes to a picture FFmpeg flags corrupt, is stood in for by
+    the last good picture (the first good one for losses at the start) at the lost packet's own pts,
+    with a warning: the video keeps its frame count and timing. Pictures come out in presentation
+    order, so a packet whose pts is passed without a picture of its own was lost. Without packet
+    timestamps a loss cannot be placed, and the picture is skipped (also with a warning).
+    """
+
+    def __init__(self, container: av.container.InputContainer, stream: av.VideoStream, warnings: list[str],
+                 path: Path) -> None:
+        self._container, self._stream, self._warnings, self._path = container, stream, warnings, path
+        self._pending: list[int] = []  # heap: pts of packets sent to the decoder, picture not out yet
+        self._timed = True  # every packet has a pts
+        self._last_good: av.VideoFrame | None = None
+        self._lost_at_start: list[tuple[int, str]] = []  # (pts, why), waiting for a good picture
+        self._damaged: set[int] = set()  # pts of packets the demuxer flagged corrupt (e.g. cut off)
+        self._last_error: str | None = None  # the decoder's complaint since the last loss
+        self.count = 0  # pictures handed out so far
+        self.discarded = 0  # packets an edit list cuts (no picture expected)
+
+    def _time(self, pts: int) -> str:
+        start = self._stream.start_time or 0
+        return f"{float((pts - start) * self._stream.time_base):.3f} s" if self._stream.time_base else f"pts {pts}"
+
+    def _warn(self, message: str) -> None:
+        self._warnings.append(f"{self._path.name}: {message}")
+
+    def __iter__(self) -> Iterator[tuple[int | None, av.VideoFrame]]:
+        demuxed = self._container.demux(self._stream)
+        while True:
+            try:
+                packet = next(demuxed)
+            except StopIteration:
+                break
+            except _AV_ERRORS as error:
+                # A broken container cannot be resynced reliably: keep what decoded so far.
+                self._warn(f"stopped reading at a container error: {_reason(error)}")
+                packet = None
+            if packet is not None and packet.size:
+                if packet.is_discard:
+                    self.discarded += 1
+                elif packet.pts is None:
+                    self._timed = False
+                else:
+                    heapq.heappush(self._pending, packet.pts)
+                    if packet.is_corrupt:
+                        self._damaged.add(packet.pts)
+            try:
+                frames = self._stream.decode(packet)  # None or the final empty packet flushes the decoder
+            except _AV_ERRORS as error:
+                self._last_error = _reason(error)
+                if not self._timed:
+                    where = f"pts {packet.pts}" if packet is not None else "the end"
+                    self._warn(f"skipped an undecodable packet at {where}: {self._last_error}")
+                frames = []
+            for frame in frames:
+                yield from self._place(frame)
+            if packet is None:
+                break
+        if self._timed:  # packets still waiting for a picture at the end were lost too
+            while self._pending:
+                yield from self._stand_in(heapq.heappop(self._pending))
+        self._check_index()
+
+    def _place(self, frame: av.VideoFrame) -> Iterator[tuple[int | None, av.VideoFrame]]:
+        pts = frame.pts
+        if pts is None:  # the decoder does not carry timestamps through: losses cannot be placed
+            self._timed = False
+        if not self._timed:
+            if frame.is_corrupt:
+                self._warn(f"skipped a corrupt frame (pts {pts})")
+                return
+            self.count += 1
+            yield pts, frame
+            return
+        while self._pending and self._pending[0] < pts:
+            yield from self._stand_in(heapq.heappop(self._pending))
+        if self._pending and self._pending[0] == pts:
+            heapq.heappop(self._pending)
+        if frame.is_corrupt:
+            self._last_error = "the decoder flagged the picture corrupt"
+            yield from self._stand_in(pts)
+            return
+        if self._last_good is None:
+            for lost, why in self._lost_at_start:
+                self._warn(f"frame at {self._time(lost)} undecodable ({why}): the first good frame stands in for it")
+                self.count += 1
+                yield lost, frame
+            self._lost_at_start.clear()
+        self._last_good = frame
+        self.count += 1
+        yield pts, frame
+
+    def _why_lost(self, pts: int) -> str:
+        if pts in self._damaged:
+            why = "its packet is damaged or cut off"
+        else:
+            why = self._last_error or "the decoder gave no picture"
+        self._last_error = None
+        return why
+
+    def _stand_in(self, pts: int) -> Iterator[tuple[int, av.VideoFrame]]:
+        why = self._why_lost(pts)
+        if self._last_good is None:
+            self._lost_at_start.append((pts, why))
+            return
+        self._warn(f"frame at {self._time(pts)} undecodable ({why}): the previous frame is repeated")
+        self.count += 1
+        yield pts, self._last_good
+
+    def _check_index(self) -> None:
+        """A file cut short loses its last packets without any error: the container's index tells."""
+        listed = self._stream.frames
+        if listed and self.count + self.discarded < listed:
+            self._warn(f"ends early (truncated?): read {self.count} of the {listed} frames its index lists")
+
+
 def _decoded_frames(
     container: av.container.InputContainer, stream: av.VideoStream, warnings: list[str], path: Path
-) -> Iterator[av.VideoFrame]:
-    """Decoded frames in order, skipping (with a warning) what FFmpeg cannot decode."""
-    demuxed = container.demux(stream)
-    while True:
-        try:
-            packet = next(demuxed)
-        except StopIteration:
-            return
-        except _AV_ERRORS as error:
-            # A broken container cannot be resynced reliably: keep what decoded so far.
-            warnings.append(f"{path.name}: stopped reading at a container error: {_reason(error)}")
-            packet = None
-        try:
-            frames = stream.decode(packet)  # None or the final empty packet flushes the decoder
-        except _AV_ERRORS as error:
-            where = f"pts {packet.pts}" if packet is not None else "the end"
-            warnings.append(f"{path.name}: skipped an undecodable packet at {where}: {_reason(error)}")
-            frames = []
-        for frame in frames:
-            if frame.is_corrupt:
-                warnings.append(f"{path.name}: skipped a corrupt frame (pts {frame.pts})")
-                continue
-            yield frame
-        if packet is None:
-            return
+) -> Iterator[tuple[int | None, av.VideoFrame]]:
+    return iter(_Pictures(container, stream, warnings, path))
 
 
 def probe_video(path: str | os.PathLike[str]) -> VideoInfo:
@@ -187,7 +303,7 @@ def probe_video(path: str | os.PathLike[str]) -> VideoInfo:
         else:
             duration_s = 0.0
         frame_count = stream.frames or round(duration_s * fps)
-        first = next(_decoded_frames(container, stream, [], path), None)
+        first = next(_decoded_frames(container, stream, [], path), (None, None))[1]
         if first is None:
             raise InputError(f"no decodable video frame in {path}")
         rotation = _clockwise(first.rotation)
@@ -238,7 +354,8 @@ def count_frames(path: str | os.PathLike[str]) -> int:
 class VideoReader:
     """Streams a video as upright RGB Frames, one at a time. Single pass; use as a context manager.
 
-    Undecodable packets and corrupt frames are skipped; each skip adds a line to `warnings`.
+    A frame that does not decode is replaced by the previous good one at its own time (see _Pictures),
+    so frame count and timing are the file's; each such frame adds a line to `warnings`.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
@@ -249,8 +366,8 @@ class VideoReader:
         self._stream.codec_context.thread_type = "AUTO"  # frame + slice threads: much faster on 720p
         self._started = False
 
-    def decoded_frames(self) -> Iterator[av.VideoFrame]:
-        """The raw PyAV frames, before RGB conversion and rotation."""
+    def decoded_frames(self) -> Iterator[tuple[int | None, av.VideoFrame]]:
+        """(pts, raw PyAV frame) before RGB conversion and rotation; a lost frame's stand-in has its pts."""
         if self._started:
             raise RuntimeError("VideoReader reads once; open a new one to read again")
         self._started = True
@@ -263,8 +380,8 @@ class VideoReader:
         if info.rotation in (90, 270):
             stored_w, stored_h = stored_h, stored_w
         start = self._stream.start_time or 0
-        for index, frame in enumerate(self.decoded_frames()):
-            pts = frame.pts if frame.pts is not None else frame.dts
+        for index, (pts, frame) in enumerate(self.decoded_frames()):
+            pts = pts if pts is not None else frame.dts
             time_s = float((pts - start) * info.time_base) if pts is not None else float(index / info.fps)
             # rgb24 covers grayscale and 10-bit sources; honour a full-range tag on plain yuv.
             rgb = frame.to_ndarray(
@@ -459,6 +576,11 @@ class VideoWriter:
                 raise OutputError(f"output is the same file as the input: {self.path}")
         _check_output_folder(self.path)
 
+        if self.width % 2 or self.height % 2:
+            self.warnings.append(
+                f"odd frame size {self.width}x{self.height}: padded to {self.width + self.width % 2}x"
+                f"{self.height + self.height % 2} by repeating the edge (H.264 4:2:0 needs even sizes)"
+            )
         self._temp = _reserve_temp_path(self.path)
         try:
             options = {}
@@ -479,6 +601,9 @@ class VideoWriter:
         except _AV_ERRORS as error:
             self.abort()
             raise OutputError(f"cannot start writing {self.path}: {_reason(error)}") from None
+        except BaseException:  # e.g. Ctrl-C while opening: no temp file may stay behind
+            self.abort()
+            raise
 
     def _add_video_stream(self, fps: Fraction, crf: int, preset: str) -> av.VideoStream:
         stream = self._container.add_stream("libx264", rate=fps, options={"crf": str(crf), "preset": preset})

@@ -198,7 +198,7 @@ def test_demo_runs_and_checks_itself_against_the_ground_truth(tmp_path, capsys, 
     assert cli.main(["demo", "--frames", "30", "-o", str(tmp_path / "demo")]) == 0
     printed = capsys.readouterr().out
     assert "median corner error" in printed
-    assert (tmp_path / "demo" / "demo_stabilized_crop.mp4").is_file()
+    assert (tmp_path / "demo" / "demo_stabilized_full.mp4").is_file()  # full-frame is the default
     assert (tmp_path / "recordings" / "demo.rrd").is_file()
 
 

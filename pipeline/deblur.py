@@ -1,0 +1,376 @@
+"""Deblurring by transferring sharper pixels from neighbouring frames (thesis chapter 5, eqs. 28-31).
+
+No point spread function is estimated. Each frame's relative blurriness is measured (eq. 28), and the pixels
+of a frame are replaced by a weighted interpolation of itself and the *sharper* neighbours, warped into its
+coordinates (eqs. 29-31).
+
+Relative blurriness (eq. 28)
+    b_t = 1 / sum_p ((f_x * I_t)(p)^2 + (f_y * I_t)(p)^2), with Sobel derivative filters on the intensity.
+    It only compares similar images, so every frame of the window (t and the neighbours compared with it) is
+    measured over the *common coverage*: the part of the scene all of them see, a convex polygon found from
+    the inter-frame transforms and rasterised in each frame's own, unwarped coordinates. Measuring the original
+    frames, not the warped ones, keeps the resampling (whose smoothing depends on each frame's sub-pixel
+    phase) out of the ratio. The sum is taken as a mean, so that the polygon's slightly different pixel area
+    in zoomed frames does not count as sharpness; over equal areas the ratio b_t / b_t' is eq. 28's.
+
+Interpolation (eqs. 29-31)
+    I^_t(p) = (I_t(p) + sum_t' w_t'(p) I_t'(T p)) / (1 + sum_t' w_t'(p)),
+    w_t'(p) = b_t / b_t' * alpha / (E_t'(p) + alpha) where b_t / b_t' > ``min_ratio`` (eq. 31: 1), else 0.
+
+Alignment error E (eq. 29 made blur-tolerant)
+    Eq. 29's |I_t'(T p) - I_t(p)| cannot tell a blurred frame from a misaligned one: comparing a blurred frame
+    with a sharp, perfectly aligned neighbour gives a large error on every textured edge, exactly where the
+    sharper pixels are wanted. Blur by a kernel that sums to 1 leaves the low frequencies unchanged, so the
+    *signed* difference is low-passed before taking its magnitude: E = max over R, G, B of
+    |G_sigma * (I_t' - I_t)| (normalised convolution over the pixels both frames have). A moving object or a
+    misregistration changes the local mean colour and keeps a large E; blur does not. On pipeline.synthetic
+    (640x360, 12 px blur, blurred frame against its sharp neighbour, exact transforms), E in intensity levels
+    on the static background (p50, p90) and where the neighbour shows the moving object and frame t does not
+    (p10, p50): sigma 0 (eq. 29 as written) 3, 22 | 112, 176; sigma 2: 1.6, 11 | 98, 137; sigma 4: 0.9, 6 |
+    71, 99; sigma 8: 0.5, 3 | 40, 60.
+
+Rejection (an addition to eq. 31)
+    alpha / (E + alpha) decays only as 1 / E, and the ratio multiplies it: a blurred frame with ~9 sharper
+    neighbours at b_t / b_t' ~ 4 still takes ~80% of a moving object's pixels from neighbours that show it
+    elsewhere (a ghost), whatever alpha. So a neighbour's pixel whose E exceeds ``reject_error``, or lies within
+    ``reject_grow_px`` of one that does (the object's interior can match by chance), gets no weight at all.
+
+Choices, measured with ``benchmarks/deblur_psnr.py --sweep`` (640x360 clips over coffee, astronaut, chelsea x
+2 seeds, 24 blurred and 60 sharp frames; PSNR change on blurred frames, on the moving object's interior, and the
+object's share taken from neighbours)::
+
+    alpha                 1: +5.18 dB    2: +5.48    4: +5.61    8: +5.68    16: +5.70    64: +5.72
+    rejection             none: +2.55 dB, object -3.76 dB, share 0.79    E > 16, grow 4: +5.10, 0.00
+                          E > 32, grow 4: +5.69, object -0.17, 0.03      E > 32, grow 8: +5.68, 0.00, 0.00
+                          E > 64, grow 8: +5.10, object -0.95, 0.20
+    sigma (px)            0 (eq. 29): +0.89 dB    2: +3.33    4: +5.68    8: +4.60 (object -1.71)
+    min ratio             1 (eq. 31): +5.47 dB, sharp frames +0.31 dB at ~7x the time per sharp frame
+                          1.05-1.5: +5.66 to +5.68, sharp frames untouched
+
+alpha: the gain saturates above 8 (within 0.04 dB of 64); a finite alpha still prefers the better aligned
+neighbours below the rejection threshold, which matters on real footage (estimated motion, parallax) more than
+on exact synthetic transforms. min ratio 1.1 rather than eq. 31's 1: equally sharp frames differ by a few
+percent (over the common coverage, on four real clips whose sharpness barely varies, the middle 90% of the
+ratios lie within 0.95-1.06, 0.91-1.09 on the fourth), and averaging them costs ~60 ms a frame for a fraction
+of a dB; equally blurred neighbours also dilute the gain (+5.47 against +5.68 dB). Lengths
+(sigma, grow) are for 360 rows and scale with the frame height, as blur lengths in pixels do.
+
+Where it runs (pipeline/stabilize.py): on the output frame, after warping and, in full mode, after completion,
+with the neighbours completion has already warped into frame t's stabilized coordinates. So no extra warps in
+full mode; transferred pixels are resampled once (as the target's own are), where deblurring before warping
+(OpenCV's videostab order) would resample them twice; and every output pixel, completed ones included, is
+treated alike, so the frame stays full. Measured (``--placement``, 24 blurred frames, PSNR over the frame /
+over the completed pixels): no deblurring 26.35 / 35.93 dB, deblurring after completion 32.05 / 44.66, the
+stabilized frame before completion 31.99 / 38.97 (the completed pixels, taken from neighbours of every
+sharpness, are then never sharpened). Pixels no sharper neighbour covers keep their value: a missing (black) pixel of
+``--mode none`` stays missing.
+
+This module never imports rerun or matplotlib.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import cv2
+import numpy as np
+from numba import njit
+
+from pipeline import geometry, smoothing
+from pipeline.completion import WarpedNeighbour, warp_neighbours
+from pipeline.mosaic import intensity
+
+# Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
+# and scale with the frame height (blur, in pixels, grows with the resolution).
+REFERENCE_HEIGHT = 360
+DEBLUR_ALPHA = 8.0
+ERROR_SIGMA_PX = 4.0
+REJECT_ERROR = 32.0
+REJECT_GROW_PX = 8
+MIN_RATIO = 1.1
+# Energy maps are kept at this fraction of the frame size: means over large polygons barely change, and
+# masking 16x fewer pixels keeps the per-frame cost of the window's blurriness small.
+ENERGY_SCALE = 0.25
+# Below this share of the frame, the window's common coverage is too small to compare sharpness on: each
+# neighbour is then compared with frame t over their pairwise overlap instead.
+MIN_COMMON_FRACTION = 0.2
+
+
+@dataclass(frozen=True)
+class DeblurConfig:
+    enabled: bool = True
+    alpha: float = DEBLUR_ALPHA  # eq. 31, in intensity units (0..255) of the alignment error E
+    radius: int = 6  # neighbours t-r..t+r are compared (<= the completion radius: their warps are reused)
+    min_ratio: float = MIN_RATIO  # a neighbour contributes only where b_t / b_t' exceeds this (eq. 31: 1)
+    error_sigma_px: float = ERROR_SIGMA_PX  # low-pass of the signed difference before E is taken (0: eq. 29)
+    reject_error: float = REJECT_ERROR  # E above this marks another scene (moving object, misregistration)
+    reject_grow_px: int = REJECT_GROW_PX  # ... and so does everything this close to such a pixel
+
+    def __post_init__(self) -> None:
+        if not (self.alpha > 0 and math.isfinite(self.alpha)):
+            raise ValueError(f"deblur alpha must be a positive number, not {self.alpha}")
+        if self.radius < 0:
+            raise ValueError(f"deblur radius must be >= 0, not {self.radius}")
+        if not self.min_ratio >= 1.0:
+            raise ValueError(f"deblur min_ratio must be >= 1 (only sharper neighbours may contribute), "
+                             f"not {self.min_ratio}")
+        if not self.error_sigma_px >= 0 or self.reject_grow_px < 0:
+            raise ValueError("deblur error_sigma_px and reject_grow_px must be >= 0")
+        if not self.reject_error > 0:
+            raise ValueError(f"deblur reject_error must be positive, not {self.reject_error}")
+
+
+@dataclass(frozen=True)
+class DeblurResult:
+    frame: np.ndarray  # (H, W, 3) uint8, after
+    before: np.ndarray  # (H, W, 3) uint8, the frame handed in
+    blurriness: float  # b_t (eq. 28) of this frame over its own whole area (for the series; NaN if unknown)
+    neighbours: tuple[int, ...]  # offsets t'-t of the sharper neighbours that contributed
+    weights: np.ndarray  # (H, W) float32 in [0, 1]: share of the output pixel that came from neighbours
+    ratios: dict[int, float] = field(default_factory=dict)  # b_t / b_t' of every neighbour compared, by offset
+
+
+@dataclass(frozen=True)
+class WindowBlurriness:
+    """Eq. 28 for frame t and its neighbours, measured where all of them see the same scene."""
+
+    own: float  # b_t over frame t's whole area (the series)
+    ratios: dict[int, float]  # b_t / b_t' by offset t' - t, each pair measured on the same scene (> 1: sharper)
+    common_fraction: float  # area of the window's common coverage / frame area (0: pairwise overlaps used)
+
+
+def gradient_energy(gray_or_rgb: np.ndarray) -> np.ndarray:
+    """(H, W) float32: (f_x * I)^2 + (f_y * I)^2, the summand of eq. 28 (Sobel filters, intensity 0..255)."""
+    image = np.asarray(gray_or_rgb)
+    gray = intensity(image) if image.ndim == 3 else image.astype(np.float32)
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, borderType=cv2.BORDER_REFLECT)
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, borderType=cv2.BORDER_REFLECT)
+    return gx * gx + gy * gy
+
+
+def blurriness(gray_or_rgb: np.ndarray, valid_mask: np.ndarray | None = None) -> float:
+    """Eq. 28 over ``valid_mask`` (bool (H, W); None: everywhere), as 1 / mean squared gradient.
+
+    inf for a flat image (no gradient at all); NaN when the mask is empty.
+    """
+    energy = gradient_energy(gray_or_rgb)
+    if valid_mask is not None:
+        if valid_mask.shape != energy.shape:
+            raise ValueError(f"valid mask {valid_mask.shape} does not match the image {energy.shape}")
+        energy = energy[valid_mask]
+    if energy.size == 0:
+        return math.nan
+    return _inverse(float(np.mean(energy, dtype=np.float64)))
+
+
+class EnergyCache:
+    """Gradient-energy maps of frames by index, so that each frame of a streaming window is filtered once."""
+
+    def __init__(self) -> None:
+        self._maps: dict[int, np.ndarray] = {}
+
+    def get(self, index: int, rgb: np.ndarray) -> np.ndarray:
+        energy = self._maps.get(index)
+        if energy is None:
+            full = gradient_energy(rgb)
+            height, width = full.shape
+            size = (max(round(width * ENERGY_SCALE), 1), max(round(height * ENERGY_SCALE), 1))
+            energy = cv2.resize(full, size, interpolation=cv2.INTER_AREA)
+            self._maps[index] = energy
+        return energy
+
+    def forget_before(self, index: int) -> None:
+        for old in [i for i in self._maps if i < index]:
+            del self._maps[old]
+
+
+def window_blurriness(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: np.ndarray, *,
+                      cache: EnergyCache | None = None) -> WindowBlurriness:
+    """b of frame t and of every neighbour in ``frames`` ({frame index: original RGB}, t included) over the
+    area all of them see; the overlap of each pair instead when that common area is below MIN_COMMON_FRACTION.
+
+    ``curr_from_prev`` are the inter-frame transforms (N, 3, 3) that chain the frames to t.
+    """
+    if t not in frames:
+        raise ValueError(f"frame {t} must be among the frames compared")
+    cache = EnergyCache() if cache is None else cache
+    height, width = frames[t].shape[:2]
+    t_from = smoothing.neighbour_transforms(curr_from_prev, t, min(frames), max(frames))
+    energy = {i: cache.get(i, rgb) for i, rgb in frames.items()}
+    own = _inverse(float(np.mean(energy[t], dtype=np.float64)))
+    rect = geometry.frame_corners(width, height)
+    # Each neighbour's frame outline in t's coordinates.
+    outlines = {i: geometry.apply(t_from[i], rect) for i in frames if i != t}
+    common = rect
+    for outline in outlines.values():
+        common = _intersect(common, outline)
+        if common is None:
+            break
+    frame_area = float((width - 1) * (height - 1))
+    fraction = 0.0 if common is None else _area(common) / frame_area
+    if fraction >= MIN_COMMON_FRACTION:
+        b_t = _mean_inverse(energy[t], common, width, height)
+        ratios = {i - t: _ratio(b_t, _mean_inverse(energy[i], geometry.apply(np.linalg.inv(t_from[i]), common),
+                                                   width, height)) for i in outlines}
+        return WindowBlurriness(own, ratios, fraction)
+    # Pairwise: t and each neighbour over their own overlap (none below 5% of the frame: not the same scene).
+    ratios = {}
+    for i, outline in outlines.items():
+        overlap = _intersect(rect, outline)
+        if overlap is not None and _area(overlap) / frame_area >= 0.05:
+            b_t = _mean_inverse(energy[t], overlap, width, height)
+            b_i = _mean_inverse(energy[i], geometry.apply(np.linalg.inv(t_from[i]), overlap), width, height)
+            ratios[i - t] = _ratio(b_t, b_i)
+    return WindowBlurriness(own, ratios, 0.0)
+
+
+def alignment_error(target: np.ndarray, neighbour: np.ndarray, valid: np.ndarray, sigma: float) -> np.ndarray:
+    """(H, W) float32: eq. 29 on low-passed images, max over R, G, B of |G_sigma * (I_t' - I_t)| over ``valid``
+    (normalised convolution: pixels outside ``valid`` do not leak in). sigma 0: eq. 29 per channel as written.
+
+    With sigma >= 2 px the low-pass runs at half resolution (what that loses, the low-pass removes anyway).
+    """
+    height, width = valid.shape
+    weight = valid.astype(np.float32)
+    if sigma <= 0:
+        difference = cv2.subtract(neighbour, target, dtype=cv2.CV_32F)
+    else:
+        half = sigma >= 2.0
+        size = (max(width // 2, 1), max(height // 2, 1))
+        if half:
+            target, neighbour = (cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in (target, neighbour))
+            weight = cv2.resize(weight, size, interpolation=cv2.INTER_AREA)
+        difference = cv2.subtract(neighbour, target, dtype=cv2.CV_32F)
+        difference *= weight[..., None]
+        s = sigma / 2.0 if half else sigma
+        difference = cv2.GaussianBlur(difference, (0, 0), s, borderType=cv2.BORDER_CONSTANT)
+        norm = cv2.GaussianBlur(weight, (0, 0), s, borderType=cv2.BORDER_CONSTANT)
+        difference /= np.maximum(norm, 1e-3)[..., None]
+    channels = cv2.split(np.abs(difference))
+    error = cv2.max(cv2.max(channels[0], channels[1]), channels[2])
+    if error.shape != (height, width):
+        error = cv2.resize(error, (width, height), interpolation=cv2.INTER_LINEAR)
+    return error
+
+
+def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[WarpedNeighbour],
+           config: DeblurConfig = DeblurConfig(), *, ratios: Mapping[int, float],
+           blurriness_t: float = math.nan) -> DeblurResult:
+    """Eqs. 30-31 for one frame, with the blur-tolerant alignment error and the rejection (module docstring).
+
+    ``target``: frame t (H, W, 3) uint8; ``target_valid``: its pixels that have content (only those change);
+    ``neighbours``: frames warped into the target's coordinates, with their valid masks; ``ratios``: b_t / b_t'
+    by offset (``window_blurriness`` on the original frames); ``blurriness_t``: b_t, for the record.
+    """
+    target = np.asarray(target)
+    if target.ndim != 3 or target.shape[2] != 3 or target.dtype != np.uint8:
+        raise ValueError(f"deblur needs an (H, W, 3) uint8 frame, not {target.shape} {target.dtype}")
+    if target_valid.shape != target.shape[:2]:
+        raise ValueError(f"valid mask {target_valid.shape} does not match the frame {target.shape[:2]}")
+    height, width = target_valid.shape
+    scale = height / REFERENCE_HEIGHT
+    grow = round(config.reject_grow_px * scale)
+    alpha = np.float32(config.alpha)
+    total = np.ones((height, width), np.float32)  # 1 + sum w, eq. 30's denominator
+    accumulated: np.ndarray | None = None
+    used: list[int] = []
+    for n in neighbours:
+        if n.rgb.shape != target.shape or n.valid.shape != target_valid.shape:
+            raise ValueError(f"neighbour {n.offset:+d} has shape {n.rgb.shape}, the frame {target.shape}")
+        ratio = float(ratios.get(n.offset, math.nan))
+        if not ratio > config.min_ratio:  # eq. 31: blurrier (or unmeasured) neighbours get no weight
+            continue
+        valid = n.valid & target_valid
+        if not valid.any():
+            continue
+        error = alignment_error(target, n.rgb, valid, config.error_sigma_px * scale)
+        rejected = (error > config.reject_error).astype(np.uint8)
+        if grow > 0:
+            rejected = cv2.dilate(rejected, np.ones((2 * grow + 1,) * 2, np.uint8))
+        valid &= rejected == 0
+        if not valid.any():
+            continue
+        if accumulated is None:
+            accumulated = target.astype(np.float32)
+        _accumulate(accumulated, total, n.rgb, error, valid, np.float32(ratio), alpha)
+        used.append(n.offset)
+    if accumulated is None:
+        return DeblurResult(target, target, blurriness_t, (), np.zeros((height, width), np.float32), dict(ratios))
+    frame = np.clip(accumulated / total[..., None] + 0.5, 0, 255).astype(np.uint8)  # eq. 30
+    return DeblurResult(frame, target, blurriness_t, tuple(used), 1.0 - 1.0 / total, dict(ratios))
+
+
+def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, frames: Mapping[int, np.ndarray],
+                 curr_from_prev: np.ndarray, orig_from_view: np.ndarray, config: DeblurConfig = DeblurConfig(), *,
+                 warped: Sequence[WarpedNeighbour] = (), cache: EnergyCache | None = None) -> DeblurResult:
+    """Deblur frame t of a stream as it is about to be written.
+
+    ``output``: frame t in the output's view (``orig_from_view`` maps it to frame t's original pixels);
+    ``output_valid``: its pixels with content (None: all); ``frames``: original frames by index, t included
+    (those beyond ``config.radius`` are ignored); ``warped``: neighbours already warped into that view (reused,
+    not warped again). Blurriness is measured on the original frames; only the sharper neighbours are warped.
+    """
+    frames = {i: rgb for i, rgb in frames.items() if abs(i - t) <= config.radius}
+    if cache is not None:
+        cache.forget_before(t - config.radius)
+    measured = window_blurriness(frames, t, curr_from_prev, cache=cache)
+    sharper = {o for o, ratio in measured.ratios.items() if ratio > config.min_ratio}
+    neighbours = [n for n in warped if n.offset in sharper]
+    to_warp = {t + o: frames[t + o] for o in sharper - {n.offset for n in neighbours}}
+    neighbours += warp_neighbours(to_warp, t, curr_from_prev, orig_from_view)
+    valid = np.ones(output.shape[:2], bool) if output_valid is None else output_valid
+    return deblur(output, valid, neighbours, config, ratios=measured.ratios, blurriness_t=measured.own)
+
+
+# ---------------------------------------------------------------------------------------------- internals
+
+
+@njit(cache=True)
+def _accumulate(accumulated: np.ndarray, total: np.ndarray, rgb: np.ndarray, error: np.ndarray, valid: np.ndarray,
+                ratio: np.float32, alpha: np.float32) -> None:
+    """Eq. 30's sums in place: accumulated += w * I_t', total += w, with w of eq. 31 where ``valid``."""
+    height, width = valid.shape
+    for y in range(height):
+        for x in range(width):
+            if valid[y, x]:
+                weight = ratio * alpha / (error[y, x] + alpha)
+                total[y, x] += weight
+                for c in range(3):
+                    accumulated[y, x, c] += weight * rgb[y, x, c]
+
+
+def _inverse(mean_energy: float) -> float:
+    return 1.0 / mean_energy if mean_energy > 0 else math.inf
+
+
+def _ratio(b_t: float, b_other: float) -> float:
+    if not (math.isfinite(b_t) and math.isfinite(b_other)) or b_other <= 0:
+        return math.nan
+    return b_t / b_other
+
+
+def _intersect(a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """Intersection of two convex polygons ((n, 2) points), None when they do not overlap."""
+    area, points = cv2.intersectConvexConvex(np.asarray(a, np.float32), np.asarray(b, np.float32))
+    if points is None or area <= 0:
+        return None
+    return points.reshape(-1, 2).astype(np.float64)
+
+
+def _area(polygon: np.ndarray) -> float:
+    return float(cv2.contourArea(np.asarray(polygon, np.float32)))
+
+
+def _mean_inverse(energy: np.ndarray, polygon: np.ndarray, width: int, height: int) -> float:
+    """1 / mean of a (downscaled) energy map over a polygon given in full-resolution pixel coordinates."""
+    small_h, small_w = energy.shape
+    sx, sy = small_w / width, small_h / height
+    # cv2.resize's pixel-centre mapping: x_small = (x + 0.5) * sx - 0.5.
+    pts = np.column_stack([(polygon[:, 0] + 0.5) * sx - 0.5, (polygon[:, 1] + 0.5) * sy - 0.5])
+    mask = np.zeros(energy.shape, np.uint8)
+    cv2.fillConvexPoly(mask, np.round(pts * 16).astype(np.int32), 1, lineType=cv2.LINE_8, shift=4)
+    if not mask.any():
+        return math.nan
+    return _inverse(float(cv2.mean(energy, mask)[0]))

@@ -1,0 +1,324 @@
+"""Recordings read back: every entity family, with the pipeline's own values, and the stage-stepping traces."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import rerun as rr
+
+import ffviz
+from ffviz import entities as ent, trace, visual
+from ffviz.recorder import FILLED_BY_BASE, RerunRecorder
+from ffviz.rrd import Recording
+from ffviz.viewer import rerun_executable
+from pipeline import geometry, synthetic
+from pipeline.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, WarpedNeighbour
+from pipeline.observer import Observers, StageCollector, Stamp
+from pipeline.stabilize import StabilizeConfig, stabilize
+
+N_FRAMES = 30
+TRACED = (5, 18)
+STAGES = ("motion", "smoothing", "input", "warp", "completion", "deblur", "output")
+PER_FRAME_IMAGES = (ent.INPUT_FRAME, ent.STABILIZED_FRAME, ent.STABILIZED_MISSING, ent.COMPLETION_FRAME,
+                    ent.COMPLETION_VARIANCE, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY,
+                    ent.COMPLETION_FALLBACK, ent.OUTPUT_FRAME)
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    """320x180 shaky clip; frame 20 black so that motion estimation warns (the `log` family)."""
+    config = synthetic.SyntheticConfig(width=320, height=180, n_frames=N_FRAMES, seed=3, jitter_px=4.0,
+                                       blur_length_px=6.0)
+    video = synthetic.generate(config)
+    video.frames[20] = np.zeros_like(video.frames[20])
+    path = tmp_path_factory.mktemp("clip") / "shaky.mp4"
+    synthetic.write_video(video, path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def full_run(clip, tmp_path_factory):
+    """Full mode, full level, lossless (so images compare exactly), traced frames + one outside the clip."""
+    rrd = tmp_path_factory.mktemp("rec") / "full.rrd"
+    collector = StageCollector(*STAGES)
+    recorder = RerunRecorder(rrd, level="full", jpeg_quality=None, trace_frames=TRACED + (999,))
+    stabilize(clip, None, StabilizeConfig(mode="full"), observer=Observers(recorder, collector))
+    return Recording.load(rrd), collector
+
+
+def by_frame(collector, stage):
+    return {stamp.index: result for stamp, result in collector.results[stage]}
+
+
+def test_every_family_has_one_row_per_frame_on_both_timelines(full_run):
+    recording, collector = full_run
+    frames = list(range(N_FRAMES))
+    for entity in PER_FRAME_IMAGES:
+        assert recording.indices(entity) == frames, entity
+        assert recording.timelines(entity) == {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}, entity
+    series = [f"{ent.MOTION_PARAMS}/{name}" for name in ent.MOTION_PARAM_NAMES]
+    series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
+    series += [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)
+               for axis in ent.TRAJECTORY_AXES]
+    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback")]
+    for entity in series:
+        assert recording.scalars(entity)[0].tolist() == frames, entity
+    motion = by_frame(collector, "motion")
+    with_features = [t for t in frames if len(motion[t].curr_points)]
+    assert recording.indices(f"{ent.MOTION_FEATURES}/points", column="Points2D:positions") == with_features
+    assert recording.indices(f"{ent.MOTION_FEATURES}/arrows", column="Arrows2D:vectors") == with_features
+    completion = by_frame(collector, "completion")
+    with_fills = [t for t in frames if completion[t].fills]
+    assert with_fills, "the clip should need local warps somewhere"
+    for entity in (ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FMM_ORDER, ent.COMPLETION_FMM_ARRIVAL):
+        assert recording.indices(entity) == with_fills, entity
+    assert recording.indices(ent.COMPLETION_FLOW_ARROWS, column="Arrows2D:vectors") == with_fills
+    assert recording.texts(ent.MOTION_STATUS, "TextLog:text") == [motion[t].status for t in frames]
+
+
+def test_logged_values_equal_the_pipelines(full_run):
+    recording, collector = full_run
+    motion = by_frame(collector, "motion")
+    width, height = 320, 180
+    params = np.array([geometry.decompose(motion[t].curr_from_prev, width, height) for t in range(N_FRAMES)])
+    for column, name in enumerate(ent.MOTION_PARAM_NAMES):
+        np.testing.assert_allclose(recording.scalars(f"{ent.MOTION_PARAMS}/{name}")[1], params[:, column], atol=1e-9)
+    np.testing.assert_array_equal(recording.scalars(ent.MOTION_INLIERS)[1], [motion[t].n_inliers for t in range(N_FRAMES)])
+    np.testing.assert_allclose(recording.scalars(ent.MOTION_RESIDUAL)[1], [motion[t].residual_px for t in range(N_FRAMES)])
+    (_, smoothed), = collector.results["smoothing"]
+    for root, truth in ((ent.TRAJECTORY_ORIGINAL, smoothed.original_trajectory),
+                        (ent.TRAJECTORY_SMOOTHED, smoothed.smoothed_trajectory)):
+        for column, axis in enumerate(ent.TRAJECTORY_AXES):
+            np.testing.assert_allclose(recording.scalars(f"{root}/{axis}")[1], truth[:, column], atol=1e-9)
+
+    inputs, warps, outputs = by_frame(collector, "input"), by_frame(collector, "warp"), by_frame(collector, "output")
+    completion = by_frame(collector, "completion")
+    for t in (0, 5, 20, 29):
+        np.testing.assert_array_equal(recording.image(ent.INPUT_FRAME, t), inputs[t].rgb)
+        np.testing.assert_array_equal(recording.image(ent.STABILIZED_FRAME, t), warps[t].frame)
+        np.testing.assert_array_equal(recording.image(ent.STABILIZED_MISSING, t) > 0, warps[t].missing)
+        np.testing.assert_array_equal(recording.image(ent.OUTPUT_FRAME, t), outputs[t])
+        result = completion[t]
+        np.testing.assert_array_equal(recording.image(ent.COMPLETION_FRAME, t), result.frame)
+        np.testing.assert_array_equal(recording.image(ent.COMPLETION_FALLBACK, t) > 0, result.fallback)
+        np.testing.assert_array_equal(recording.image(ent.COMPLETION_ACCEPTED, t) == 2, result.mosaic.accepted)
+        np.testing.assert_array_equal(recording.image(ent.COMPLETION_VARIANCE, t),
+                                      np.where(np.isfinite(result.mosaic.variance), result.mosaic.variance, np.nan)
+                                      .astype(np.float32))
+        filled_by = recording.image(ent.COMPLETION_FILLED_BY, t)
+        np.testing.assert_array_equal(filled_by == 1, result.source == SOURCE_MOSAIC)
+        np.testing.assert_array_equal(filled_by == 2, result.source == SOURCE_FALLBACK)
+        warped = result.source == SOURCE_LOCAL_WARP
+        np.testing.assert_array_equal(filled_by[warped].astype(int) - FILLED_BY_BASE, result.filled_by[warped])
+        if result.fills:
+            inpainted = result.fills[0].inpainted
+            order = recording.image(ent.COMPLETION_FMM_ORDER, t)
+            np.testing.assert_array_equal(np.nan_to_num(order, nan=-1), inpainted.order)
+            np.testing.assert_array_equal(recording.image(ent.COMPLETION_FLOW_IMAGE, t), visual.flow_to_rgb(inpainted.flow))
+        frame_area = result.missing.size
+        for name, value in (("missing", result.missing.sum()), ("fallback", result.fallback.sum()),
+                            ("local_warp", warped.sum())):
+            frames, values = recording.scalars(f"{ent.COMPLETION_STATS}/{name}")
+            assert values[t] == pytest.approx(value / frame_area, abs=1e-12)
+
+
+def test_deblur_family_matches_the_pipeline(full_run):
+    recording, collector = full_run
+    deblurred = by_frame(collector, "deblur")
+    if not deblurred:
+        pytest.skip("pipeline/stabilize.py does not run deblurring")
+    frames = sorted(deblurred)
+    logged_frames, blurriness = recording.scalars(ent.DEBLUR_BLURRINESS)
+    assert logged_frames.tolist() == frames
+    np.testing.assert_allclose(blurriness, [deblurred[t].blurriness for t in frames], rtol=1e-12)
+    np.testing.assert_array_equal(recording.scalars(ent.DEBLUR_NEIGHBOURS)[1], [len(deblurred[t].neighbours) for t in frames])
+    sharpened = [t for t in frames if deblurred[t].neighbours]
+    assert sharpened, "the clip's blurred frames should have sharper neighbours"
+    for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS):
+        assert recording.indices(entity) == sharpened, entity
+    t = sharpened[0]
+    np.testing.assert_array_equal(recording.image(ent.DEBLUR_BEFORE, t), deblurred[t].before)
+    np.testing.assert_array_equal(recording.image(ent.DEBLUR_AFTER, t), deblurred[t].frame)
+    assert_weights(recording.image(ent.DEBLUR_WEIGHTS, t), deblurred[t].weights)
+
+
+def test_log_and_meta(full_run):
+    recording, collector = full_run
+    logged = recording.texts(ent.LOG, "TextLog:text")
+    warnings = [message for _, message in collector.warnings]
+    assert warnings, "the black frame should make motion estimation warn"
+    # Per-frame warnings sit at their frame; the others are static.
+    assert recording.indices(ent.LOG, column="TextLog:text") == sorted(
+        {stamp.index for stamp, _ in collector.warnings if stamp is not None})
+    # Every pipeline warning, plus the recorder's note about the traced frame outside the clip.
+    assert sorted(m for m in logged if "traced frame" not in m) == sorted(warnings)
+    assert any("999" in m and "not traced" in m for m in logged)
+    meta = recording.texts(ent.META, "TextDocument:text")[0]
+    assert f"rerun-sdk {rr.__version__}" in meta and f"ffviz {ffviz.__version__}" in meta
+
+
+def test_traced_frames_step_through_every_stage_in_order(full_run):
+    recording, collector = full_run
+    inputs, warps, outputs = by_frame(collector, "input"), by_frame(collector, "warp"), by_frame(collector, "output")
+    completion, deblurred = by_frame(collector, "completion"), by_frame(collector, "deblur")
+    assert ent.trace_image(999) not in recording.entities
+    for t in TRACED:
+        image, label = ent.trace_image(t), ent.trace_label(t)
+        expected_stages = [0, 1, 2, 3] + ([4] if t in deblurred else []) + [5]
+        assert recording.indices(image, ent.STAGE_TIMELINE) == expected_stages
+        assert recording.indices(image, ent.FRAME_TIMELINE) == [t]  # findable on the frame timeline
+        labels = recording.labels(label, ent.STAGE_TIMELINE)
+        assert sorted(labels) == expected_stages
+        for stage, text in labels.items():
+            assert text.endswith(ent.TRACE_STAGES[stage]) and f"frame {t}" in text
+        result = completion[t]
+        local_warp = np.where((result.source == SOURCE_LOCAL_WARP)[..., None], result.frame, result.mosaic.frame)
+        expected = {0: inputs[t].rgb, 1: warps[t].frame, 2: result.mosaic.frame, 3: local_warp, 5: outputs[t]}
+        if t in deblurred:
+            expected[4] = deblurred[t].frame
+        for stage, rgb in expected.items():
+            np.testing.assert_array_equal(recording.image(image, stage, ent.STAGE_TIMELINE), rgb, err_msg=f"stage {stage}")
+    # Nothing else landed on the stage timeline: it was switched off after each trace.
+    assert recording.indices(ent.OUTPUT_FRAME, ent.STAGE_TIMELINE) == []
+
+
+def test_fast_marching_band_advances_in_the_pipelines_visiting_order(full_run):
+    recording, collector = full_run
+    completion = by_frame(collector, "completion")
+    for t in TRACED:
+        order = completion[t].fills[0].inpainted.order
+        n_filled = int(order.max()) + 1
+        steps = min(trace.FMM_STEPS, n_filled)
+        entity = ent.trace_fmm(t)
+        assert recording.indices(entity, ent.FMM_STEP_TIMELINE) == list(range(steps + 1))
+        assert recording.indices(entity, ent.FRAME_TIMELINE) == [t]
+        pictures = [recording.image(entity, s, ent.FMM_STEP_TIMELINE) for s in range(steps + 1)]
+        to_fill = order >= 0
+        final = pictures[-1][to_fill]
+        for step, picture in enumerate(pictures):
+            # Exactly the pixels Fast Marching visited before this step's share of the order show their final
+            # colour; the rest show the "to fill" colour or the band.
+            threshold = round(step * n_filled / steps)
+            shown = (picture[to_fill] == final).all(axis=-1)
+            np.testing.assert_array_equal(shown, order[to_fill] < threshold, err_msg=f"frame {t} step {step}")
+            band = (picture == trace.BAND_RGB).all(axis=-1) & to_fill
+            if 0 < step < steps:
+                assert band.any() and (order[band] >= threshold).all()
+        labels = recording.labels(ent.trace_fmm_label(t), ent.FMM_STEP_TIMELINE)
+        assert f"{n_filled} of {n_filled} pixels filled" in labels[steps]
+
+
+def test_summary_level_keeps_series_and_output_and_traces_only_when_asked(clip, tmp_path):
+    default = tmp_path / "default.rrd"
+    stabilize(clip, None, StabilizeConfig(mode="none"), observer=RerunRecorder(default, level="summary"))
+    asked = tmp_path / "asked.rrd"
+    collector = StageCollector("output", "deblur")
+    stabilize(clip, None, StabilizeConfig(mode="none"),
+              observer=Observers(RerunRecorder(asked, level="summary", trace_frames=[7]), collector))
+    recording = Recording.load(default)
+    assert not any(e.startswith(f"{ent.TRACE}/") for e in recording.entities)
+    assert recording.indices(ent.OUTPUT_FRAME) == list(range(N_FRAMES))
+    assert recording.indices(ent.INPUT_FRAME) == [] and recording.indices(ent.STABILIZED_FRAME) == []
+    # Images are JPEG by default: close to the pipeline's output, not equal.
+    outputs = by_frame(collector, "output")
+    decoded = recording.image(ent.OUTPUT_FRAME, 10)
+    assert np.mean(np.abs(decoded.astype(float) - outputs[10])) < 4.0
+    asked_recording = Recording.load(asked)
+    # Mode none: no completion stages.
+    deblurred = [4] if 7 in by_frame(collector, "deblur") else []
+    assert asked_recording.indices(ent.trace_image(7), ent.STAGE_TIMELINE) == [0, 1] + deblurred + [5]
+    # The default blueprint is embedded, with a view of the traced frame.
+    printed = subprocess.run([rerun_executable(), "rrd", "print", "-vvv", str(asked)], capture_output=True, text=True,
+                             env=dict(os.environ, RERUN_ANALYTICS="0"), check=True).stdout
+    assert "Blueprint" in printed and "frame 7: input -> ... -> output" in printed
+
+
+def test_default_traced_frames_are_spread_and_have_missing_area():
+    n, width, height = 30, 320, 180
+    orig_from_stab = np.repeat(np.eye(3)[None], n, axis=0)
+    shifted = {4: 6.0, 13: 2.0, 14: 9.0, 25: 3.0}  # frame: x shift (px) -> a missing strip that wide
+    for t, dx in shifted.items():
+        orig_from_stab[t, 0, 2] = dx
+    missing = trace.missing_fractions(orig_from_stab, width, height)
+    np.testing.assert_allclose(missing[list(shifted)], [dx / width for dx in shifted.values()], atol=1e-6)
+    assert trace.default_trace_frames(orig_from_stab, width, height, count=3) == [4, 14, 25]
+    # No frame with missing area: the middle of each part.
+    assert trace.default_trace_frames(np.repeat(np.eye(3)[None], n, axis=0), width, height, count=3) == [5, 15, 25]
+
+
+def test_frame_lists_parse_or_explain():
+    assert trace.parse_frame_list("10,40") == (10, 40)
+    assert trace.parse_frame_list(" 40, 10,10 ") == (10, 40)
+    assert trace.parse_frame_list("none") == () and trace.parse_frame_list("auto") is None
+    for bad in ("ten", "3,-1"):
+        with pytest.raises(ValueError, match="frame"):
+            trace.parse_frame_list(bad)
+
+
+def assert_weights(recorded, weights):
+    """Weights are recorded as uint8 (255 = 1): equal to the pipeline's to half a step."""
+    np.testing.assert_allclose(recorded / ent.DEBLUR_WEIGHTS_SCALE, weights, atol=0.5 / ent.DEBLUR_WEIGHTS_SCALE + 1e-6)
+
+
+def _info(width=64, height=48):
+    return SimpleNamespace(path="fake.mp4", width=width, height=height, fps=30.0, frame_count=2)
+
+
+def _deblur_run(tmp_path, results):
+    """Hand deblurring results for frames 0, 1, ... to a lossless recorder tracing frame 0; read it back."""
+    rrd = tmp_path / "deblur.rrd"
+    height, width = results[0].frame.shape[:2]
+    recorder = RerunRecorder(rrd, level="full", jpeg_quality=None, trace_frames=[0])
+    recorder.on_start(_info(width, height), None)
+    for t, result in enumerate(results):
+        recorder.on_stage("deblur", Stamp(t, t / 30), result)
+    recorder.close()
+    return Recording.load(rrd)
+
+
+def test_deblur_results_are_recorded_duck_typed(tmp_path):
+    rng = np.random.default_rng(0)
+    image = lambda: rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    sharpened = SimpleNamespace(frame=image(), before=image(), blurriness=2.5e-4, neighbours=(-1, 2),
+                                weights=rng.random((48, 64), dtype=np.float32))
+    untouched = image()
+    unchanged = SimpleNamespace(frame=untouched, before=untouched, blurriness=1.0e-4, neighbours=(),
+                                weights=np.zeros((48, 64), np.float32))
+    recording = _deblur_run(tmp_path, [sharpened, unchanged])
+    np.testing.assert_allclose(recording.scalars(ent.DEBLUR_BLURRINESS)[1], [2.5e-4, 1.0e-4])
+    np.testing.assert_array_equal(recording.scalars(ent.DEBLUR_NEIGHBOURS)[1], [2, 0])
+    # Only the sharpened frame has before/after/weights (the other frame clears them).
+    for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS):
+        assert recording.indices(entity) == [0], entity
+        assert recording.rows(entity) == 2, entity
+    np.testing.assert_array_equal(recording.image(ent.DEBLUR_BEFORE, 0), sharpened.before)
+    np.testing.assert_array_equal(recording.image(ent.DEBLUR_AFTER, 0), sharpened.frame)
+    assert_weights(recording.image(ent.DEBLUR_WEIGHTS, 0), sharpened.weights)
+    np.testing.assert_array_equal(recording.image(ent.trace_image(0), 4, ent.STAGE_TIMELINE), sharpened.frame)
+
+
+def test_real_deblur_results_are_recorded(tmp_path):
+    deblur = pytest.importorskip("pipeline.deblur", reason="pipeline/deblur.py not there yet")
+    video = synthetic.generate(synthetic.SyntheticConfig(width=160, height=96, n_frames=4, seed=1, moving_object=False,
+                                                         blurred_frames=(2,), blur_length_px=6.0))
+    everywhere = np.ones((96, 160), bool)
+    # Frame 2 is blurred; its sharp version, perfectly aligned, is a sharper neighbour. The other way round,
+    # a blurred neighbour of a sharp frame contributes nothing.
+    def run(target, neighbour):
+        b_t = deblur.blurriness(target)
+        return deblur.deblur(target, everywhere, [WarpedNeighbour(1, neighbour, everywhere)],
+                             ratios={1: b_t / deblur.blurriness(neighbour)}, blurriness_t=b_t)
+
+    sharpened = run(video.frames[2], video.sharp_frames[2])
+    unchanged = run(video.sharp_frames[2], video.frames[2])
+    assert sharpened.neighbours == (1,) and unchanged.neighbours == ()
+    recording = _deblur_run(tmp_path, [sharpened, unchanged])
+    np.testing.assert_allclose(recording.scalars(ent.DEBLUR_BLURRINESS)[1], [sharpened.blurriness, unchanged.blurriness])
+    np.testing.assert_array_equal(recording.scalars(ent.DEBLUR_NEIGHBOURS)[1], [1, 0])
+    assert recording.indices(ent.DEBLUR_AFTER) == [0]
+    np.testing.assert_array_equal(recording.image(ent.DEBLUR_AFTER, 0), sharpened.frame)
+    assert_weights(recording.image(ent.DEBLUR_WEIGHTS, 0), sharpened.weights)
