@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ffviz import batch, cli
-from pipeline import segments, synthetic
+from pipeline import segments, synthetic, video_io
 from pipeline import stabilize as stab
 from pipeline.observer import StageCollector
 
@@ -113,3 +113,18 @@ def test_segment_parallel_run_gives_the_single_runs_frames(local_ray, tmp_path):
     for (_, expected), (_, got) in zip(single.results["output"], parallel.results["output"]):
         np.testing.assert_array_equal(got, expected)
     assert (tmp_path / "out.mp4").is_file()
+
+
+def test_segmented_output_keeps_the_audio_and_the_timing(tmp_path):
+    from tests.test_video_io import audio_seconds, make_video
+
+    clip = make_video(tmp_path / "with_audio.mp4", frames=40, audio="aac")
+    out = tmp_path / "out.mp4"
+    # Segments run in this process here (serial_map): what is checked is the join, not Ray.
+    segments.run(clip, out, stab.StabilizeConfig(mode="none"), segment_frames=12)
+    source, result = video_io.probe_video(clip), video_io.probe_video(out)
+    assert result.has_audio
+    assert video_io.count_frames(out) == video_io.count_frames(clip) == 40
+    assert result.fps == source.fps and (result.width, result.height) == (source.width, source.height)
+    codec, seconds = audio_seconds(out)
+    assert codec == "aac" and abs(seconds - audio_seconds(clip)[1]) < 0.05
