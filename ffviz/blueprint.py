@@ -3,7 +3,7 @@ deblurring, trajectories original vs smoothed, motion, log."""
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import rerun.blueprint as rrb
 
@@ -18,23 +18,26 @@ def _trajectory_view(axis: str, unit: str) -> rrb.TimeSeriesView:
     )
 
 
-def _stages_tab(traced: Sequence[int]) -> rrb.Container:
-    """One view per traced frame; they step through the stages on the `stage` timeline."""
-    views = [rrb.Spatial2DView(name=f"frame {t}: input -> ... -> output (select timeline 'stage')",
-                               origin=f"/{ent.TRACE}/{t}", contents=[f"/{ent.trace_image(t)}", f"/{ent.trace_label(t)}"])
+def _traced_tab(name: str, traced: Sequence[int], title: Callable[[int], str],
+                contents: Callable[[int], Sequence[str]]) -> rrb.Container:
+    """One view per traced frame (or a placeholder when none is traced)."""
+    views = [rrb.Spatial2DView(name=title(t), origin=f"/{ent.TRACE}/{t}", contents=[f"/{e}" for e in contents(t)])
              for t in traced]
     if not views:
         views = [rrb.TextDocumentView(name="no traced frames", origin=f"/{ent.META}")]
-    return rrb.Grid(*views, name="stages")
+    return rrb.Grid(*views, name=name)
+
+
+def _stages_tab(traced: Sequence[int]) -> rrb.Container:
+    """The traced frames step through the stages on the `stage` timeline."""
+    return _traced_tab("stages", traced, lambda t: f"frame {t}: input -> ... -> output (select timeline 'stage')",
+                       lambda t: [ent.trace_image(t), ent.trace_label(t)])
 
 
 def _fmm_tab(traced: Sequence[int]) -> rrb.Container:
-    views = [rrb.Spatial2DView(name=f"frame {t}: motion inpainting, Fast Marching band (select timeline 'fmm_step')",
-                               origin=f"/{ent.TRACE}/{t}", contents=[f"/{ent.trace_fmm(t)}", f"/{ent.trace_fmm_label(t)}"])
-             for t in traced]
-    if not views:
-        views = [rrb.TextDocumentView(name="no traced frames", origin=f"/{ent.META}")]
-    return rrb.Grid(*views, name="motion inpainting")
+    return _traced_tab("motion inpainting", traced,
+                       lambda t: f"frame {t}: motion inpainting, Fast Marching band (select timeline 'fmm_step')",
+                       lambda t: [ent.trace_fmm(t), ent.trace_fmm_label(t)])
 
 
 def _deblur_tab() -> rrb.Container:

@@ -33,6 +33,7 @@ import pytest
 
 from ffviz import cli
 from pipeline import synthetic, video_io
+from tests.test_video_io import mux_sine
 
 ROOT = Path(__file__).resolve().parents[1]
 FPS = 25
@@ -142,16 +143,7 @@ def with_damaged_packet(source: Path, target: Path, index: int, how: str) -> Pat
 
 def audio_only(path: Path) -> Path:
     with av.open(str(path), "w", format="mp4") as container:
-        stream = container.add_stream("aac", rate=44100, layout="mono")
-        for start in range(0, 44100, 1024):
-            t = (start + np.arange(1024)) / 44100
-            frame = av.AudioFrame.from_ndarray((0.3 * np.sin(2 * np.pi * 440 * t)).astype(np.float32)[None],
-                                               format="fltp", layout="mono")
-            frame.sample_rate, frame.pts, frame.time_base = 44100, start, Fraction(1, 44100)
-            for packet in stream.encode(frame):
-                container.mux(packet)
-        for packet in stream.encode(None):
-            container.mux(packet)
+        mux_sine(container, container.add_stream("aac", rate=44100, layout="mono"), 1.0)
     return path
 
 

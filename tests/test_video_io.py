@@ -67,19 +67,24 @@ def make_video(
         for packet in stream.encode(None):
             container.mux(packet)
         if audio_stream is not None:
-            seconds = float((pts[-1] + 1) * time_base)
-            chunk = 1024
-            for start in range(0, int(seconds * 44100), chunk):
-                t = (start + np.arange(chunk)) / 44100
-                samples = (0.3 * np.sin(2 * np.pi * 440 * t)).astype(np.float32)[None]
-                # PyAV converts float samples to whatever the encoder takes.
-                frame = av.AudioFrame.from_ndarray(samples, format="fltp", layout="mono")
-                frame.sample_rate, frame.pts, frame.time_base = 44100, start, Fraction(1, 44100)
-                for packet in audio_stream.encode(frame):
-                    container.mux(packet)
-            for packet in audio_stream.encode(None):
-                container.mux(packet)
+            mux_sine(container, audio_stream, float((pts[-1] + 1) * time_base))
     return path
+
+
+def mux_sine(container: av.container.OutputContainer, audio_stream: av.audio.stream.AudioStream,
+             seconds: float) -> None:
+    """Encode and mux `seconds` of a 440 Hz mono sine at 44.1 kHz into `audio_stream`, then flush it."""
+    chunk = 1024
+    for start in range(0, int(seconds * 44100), chunk):
+        t = (start + np.arange(chunk)) / 44100
+        samples = (0.3 * np.sin(2 * np.pi * 440 * t)).astype(np.float32)[None]
+        # PyAV converts float samples to whatever the encoder takes.
+        frame = av.AudioFrame.from_ndarray(samples, format="fltp", layout="mono")
+        frame.sample_rate, frame.pts, frame.time_base = 44100, start, Fraction(1, 44100)
+        for packet in audio_stream.encode(frame):
+            container.mux(packet)
+    for packet in audio_stream.encode(None):
+        container.mux(packet)
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
