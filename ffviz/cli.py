@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     from ffviz.batch import add_parser as add_batch_parser  # imports no Ray: that happens when a batch runs
 
     add_batch_parser(commands, _add_stabilize_options)
+    from ffviz.bench import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
+
+    add_bench_parser(commands)
     return parser
 
 
@@ -108,6 +111,8 @@ def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None 
                    help="frames to step through every stage in the recording (timelines 'stage' and 'fmm_step'); "
                         "'none' for none (default: 3 frames with missing area at --record full, none at summary)")
     p.add_argument("--crf", type=int, default=18, help="x264 quality of the output (lower is better; default: %(default)s)")
+    p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
+                   help="frames processed at once, on threads (default: one per CPU core); the output is the same")
 
 
 MAX_RADIUS = 100_000  # frames; the smoothing kernel is allocated at 2k+1 taps
@@ -118,6 +123,8 @@ def _check_options(args: argparse.Namespace) -> None:
     """What the configs cannot check: values argparse parses but x264 or the kernel cannot use."""
     if not 0 <= args.crf <= 51:
         raise ConfigError(f"--crf must be between 0 and 51 (x264's range), not {args.crf}")
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be at least 1, not {args.workers}")
     if args.smoothing_radius > MAX_RADIUS:
         raise ConfigError(f"-k must be at most {MAX_RADIUS}, not {args.smoothing_radius}")
     # Outside these the kernel's sigma**2 underflows (0/0) or overflows; the ends already mean none/uniform.
@@ -161,7 +168,8 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
                                  trace_frames=args.trace_frames)
     try:
         report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
-                                progress=tqdm_progress, overwrite=overwrite, crf=args.crf)
+                                progress=tqdm_progress, overwrite=overwrite, crf=args.crf,
+                                workers=getattr(args, "workers", None))
     except BaseException:
         if recorder is not None:
             recorder.abort()
@@ -244,8 +252,14 @@ def cmd_batch(args: argparse.Namespace) -> int:
     return run_batch(args, _stabilize_config(args))
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from ffviz.bench import cmd_bench as run_bench
+
+    return run_bench(args)
+
+
 COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics, "view": cmd_view,
-            "figures": cmd_figures, "batch": cmd_batch}
+            "figures": cmd_figures, "batch": cmd_batch, "bench": cmd_bench}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,176 @@
+"""The results of `ffviz bench`: the Markdown table, bench.md/csv/json, the plot and the targets block."""
+
+from __future__ import annotations
+
+import csv
+import json
+import statistics
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+from ffviz.bench import BenchRow
+
+# (column, value of a row, format); None prints as "-".
+COLUMNS: tuple[tuple[str, Callable[[BenchRow], object], str], ...] = (
+    ("clip", lambda r: r.clip, "{}"),
+    ("method", lambda r: r.method, "{}"),
+    ("size", lambda r: f"{r.width}x{r.height}", "{}"),
+    ("frames", lambda r: r.frames, "{}"),
+    ("seconds", lambda r: r.seconds, "{:.2f}"),
+    ("fps", lambda r: r.fps, "{:.2f}"),
+    ("cpu_s", lambda r: r.cpu_seconds, "{:.2f}"),
+    ("peak_MiB", lambda r: r.peak_mib, "{:.0f}"),
+    ("jitter_px", lambda r: r.quality and r.quality.jitter_px, "{:.3f}"),
+    ("stab_T", lambda r: r.quality and r.quality.stab_T, "{:.3f}"),
+    ("stab_R", lambda r: r.quality and r.quality.stab_R, "{:.3f}"),
+    ("crop", lambda r: r.quality and r.quality.crop, "{:.3f}"),
+    ("distort", lambda r: r.quality and r.quality.distort, "{:.3f}"),
+    ("black", lambda r: r.quality and r.quality.black, "{:.4f}"),
+    ("note", lambda r: r.error or None, "{}"),
+)
+HEADER = ("| " + " | ".join(name for name, _, _ in COLUMNS) + " |\n"
+          + "|" + "---|" * len(COLUMNS))
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    repeat: int
+    cpus: int
+    load_before: tuple[float, float, float]
+    load_after: tuple[float, float, float]
+    notes: list[str] = field(default_factory=list)
+
+
+def _cell(value: object, fmt: str) -> str:
+    if value is None or value == "":
+        return "-"
+    return fmt.format(value).replace("|", "/")  # a note must not split the Markdown row
+
+
+def markdown_line(row: BenchRow) -> str:
+    return "| " + " | ".join(_cell(get(row), fmt) for _, get, fmt in COLUMNS) + " |"
+
+
+def _flat(row: BenchRow) -> dict:
+    values = {name: get(row) for name, get, _ in COLUMNS}
+    values["size"] = f"{row.width}x{row.height}"
+    return values
+
+
+def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
+    """bench.md, bench.csv, bench.json and bench.png in out; returns their paths."""
+    md, table_csv, table_json, png = (out / f"bench.{ext}" for ext in ("md", "csv", "json", "png"))
+    seconds_note = f"median seconds of {run.repeat} runs" if run.repeat > 1 else "seconds of one run"
+    md.write_text("\n".join([
+        HEADER, *map(markdown_line, rows), "",
+        f"{seconds_note}; fps = input frames / seconds; cpu_s = user + system seconds; "
+        "peak_MiB = the method's peak RSS (wait4); quality from pipeline.metrics.compare against the input.",
+        f"{run.cpus} CPUs; load average {run.load_before[0]:.1f} at the start, {run.load_after[0]:.1f} at the end.",
+        *run.notes, "", *targets(rows), ""]))
+    with table_csv.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=[name for name, _, _ in COLUMNS])
+        writer.writeheader()
+        writer.writerows(_flat(r) for r in rows)
+    table_json.write_text(json.dumps({
+        "run": asdict(run),
+        "rows": [{**_flat(r), "seconds_runs": r.seconds_runs, "cpu_seconds_runs": r.cpu_seconds_runs,
+                  "peak_rss_bytes": r.peak_rss_bytes} for r in rows],
+    }, indent=2))
+    plot(rows, png)
+    return [md, table_csv, table_json, png]
+
+
+# -- targets -------------------------------------------------------------------------------------------------
+
+def _by_clip(rows: Sequence[BenchRow]) -> dict[str, dict[str, BenchRow]]:
+    grouped: dict[str, dict[str, BenchRow]] = {}
+    for row in rows:
+        grouped.setdefault(row.clip, {})[row.method] = row
+    return grouped
+
+
+def _speed_ratio(ours: BenchRow | None, peer: BenchRow | None, ours_name: str,
+                 peer_name: str) -> tuple[str, float | None]:
+    missing = [name for name, row in ((ours_name, ours), (peer_name, peer)) if row is None or row.fps is None]
+    if missing:
+        return f"{ours_name} vs {peer_name}: n/a ({', '.join(missing)} not measured)", None
+    ratio = ours.fps / peer.fps
+    return f"{ours_name} {ours.fps:.2f} fps vs {peer_name} {peer.fps:.2f} fps = {ratio:.2f}x", ratio
+
+
+def targets(rows: Sequence[BenchRow]) -> list[str]:
+    """The issue's speed targets read off the table: ffviz full vs the OpenCV sample at 640x360,
+    ffviz none and crop vs vid.stab everywhere. Ratios are ffviz fps / peer fps (> 1: ffviz faster)."""
+    lines = ["targets (from this table; printed, never asserted; ratio = ffviz fps / peer fps):"]
+    grouped = _by_clip(rows)
+    comparisons = (("ffviz full", "opencv", lambda r: (r.width, r.height) == (640, 360)),
+                   ("ffviz none", "vidstab", lambda r: True),
+                   ("ffviz crop", "vidstab", lambda r: True))
+    for ours, peer, applies in comparisons:
+        ratios = []
+        clips = [(clip, methods) for clip, methods in grouped.items()
+                 if "input" in methods and applies(methods["input"])]
+        if not clips:
+            lines.append(f"  {ours} vs {peer}: no 640x360 clip in this run")
+            continue
+        for clip, methods in clips:
+            text, ratio = _speed_ratio(methods.get(ours), methods.get(peer), ours, peer)
+            lines.append(f"  {clip}: {text}")
+            if ratio is not None:
+                ratios.append(ratio)
+        if len(ratios) > 1:
+            lines.append(f"  {ours} vs {peer}, median over {len(ratios)} clips: {statistics.median(ratios):.2f}x")
+    return lines
+
+
+# -- plot ----------------------------------------------------------------------------------------------------
+
+def plot(rows: Sequence[BenchRow], path: Path) -> None:
+    """Left: speed against steadiness per clip; right: median frames/s and peak memory per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    input_jitter = {r.clip: r.quality.jitter_px for r in rows
+                    if r.method == "input" and r.quality and r.quality.jitter_px}
+    methods = list(dict.fromkeys(r.method for r in rows if r.method != "input"))
+    colours = {m: plt.get_cmap("tab10")(i % 10) for i, m in enumerate(methods)}
+    fig, (scatter, fps_bars, mem_bars) = plt.subplots(1, 3, figsize=(17, 5.2),
+                                                      gridspec_kw={"width_ratios": [1.4, 1, 1]})
+    for method in methods:
+        points = [(r.fps, r.quality.jitter_px / input_jitter[r.clip]) for r in rows
+                  if r.method == method and r.fps and r.quality and r.quality.jitter_px is not None
+                  and r.clip in input_jitter]
+        if points:
+            xs, ys = zip(*points)
+            scatter.scatter(xs, ys, s=40, color=colours[method], label=method, alpha=0.85)
+    scatter.axhline(1.0, color="grey", linestyle="--", linewidth=1, label="input (1.0)")
+    scatter.set_xscale("log")
+    plain = matplotlib.ticker.FuncFormatter(lambda value, _: f"{value:g}")  # 20, not 2x10^1
+    scatter.xaxis.set_major_formatter(plain)
+    scatter.xaxis.set_minor_formatter(plain)
+    scatter.set_xlabel("frames/s (log scale; right is faster)")
+    scatter.set_ylabel("residual jitter, output / input (lower is steadier)")
+    scatter.set_title("speed vs steadiness, one point per clip")
+    scatter.grid(True, which="both", alpha=0.3)
+    scatter.legend(fontsize=8)
+
+    for axis, value, title, fmt in ((fps_bars, lambda r: r.fps, "frames/s (median over clips)", "{:.1f}"),
+                                    (mem_bars, lambda r: r.peak_mib, "peak memory, MiB (median over clips)", "{:.0f}")):
+        medians = []
+        for method in methods:
+            values = [value(r) for r in rows if r.method == method and value(r) is not None]
+            medians.append(statistics.median(values) if values else 0.0)
+        bars = axis.bar(range(len(methods)), medians, color=[colours[m] for m in methods])
+        axis.bar_label(bars, labels=[fmt.format(v) for v in medians], fontsize=8)
+        axis.set_xticks(range(len(methods)), methods, rotation=30, ha="right")
+        axis.set_title(title)
+        axis.grid(True, axis="y", alpha=0.3)
+    clips = len(input_jitter)
+    fig.suptitle(f"ffviz bench: {clips} clip{'s' if clips != 1 else ''}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,138 @@
+"""`ffviz bench` end to end on a tiny synthetic clip, and the child-process measurement it relies on."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import sys
+from collections import Counter
+
+import cv2
+import numpy as np
+import pytest
+
+from ffviz import bench
+from ffviz.cli import main
+from pipeline import synthetic
+
+MiB = 2**20
+
+
+@pytest.fixture(scope="module")
+def tiny_clip(tmp_path_factory):
+    """30 frames of 320x180 with the demo's hand-held shake (6 px, 1 degree)."""
+    path = tmp_path_factory.mktemp("bench-in") / "tiny.mp4"
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30, seed=1)),
+                          path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def bench_run(tiny_clip, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench-out")
+    code = main(["bench", str(tiny_clip), "--modes", "crop,none", "--peers", "vidstab,deshake,opencv",
+                 "--out", str(out)])
+    assert code == 0
+    rows = {row["method"]: row for row in json.loads((out / "bench.json").read_text())["rows"]}
+    return out, rows
+
+
+def test_writes_table_files_and_plot(bench_run):
+    out, rows = bench_run
+    markdown = (out / "bench.md").read_text()
+    assert markdown.startswith("| clip | method |")
+    for method in rows:
+        assert f"| tiny.mp4 | {method} |" in markdown
+    with (out / "bench.csv").open() as f:
+        assert [r["method"] for r in csv.DictReader(f)] == list(rows)
+    png = (out / "bench.png").read_bytes()
+    assert png.startswith(b"\x89PNG") and len(png) > 10_000
+
+
+def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
+    _, rows = bench_run
+    source = rows["input"]
+    assert source["frames"] == 30 and source["fps"] is None and source["jitter_px"] > 3.0
+    for mode in ("crop", "none"):
+        row = rows[f"ffviz {mode}"]
+        assert row["note"] is None
+        assert row["frames"] == 30 and row["fps"] > 0 and row["cpu_s"] > 0
+        assert row["fps"] == pytest.approx(30 / row["seconds"])
+        assert 10 < row["peak_MiB"] < 4096
+        assert row["jitter_px"] < source["jitter_px"]
+    assert rows["ffviz crop"]["black"] < 0.01
+    assert rows["ffviz none"]["black"] > rows["ffviz crop"]["black"] + 0.005  # uncovered borders stay black
+
+
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg not installed: no vidstab/deshake peers")
+def test_installed_peers_get_rows(bench_run):
+    _, rows = bench_run
+    peers = ["vidstab", "deshake"] + (["opencv"] if bench.OPENCV_VIDEOSTAB.is_file() else [])
+    for peer in peers:
+        row = rows[peer]
+        assert row["note"] is None, row["note"]
+        assert row["fps"] > 0 and 10 < row["peak_MiB"] < 4096
+        assert row["jitter_px"] is not None and row["black"] is not None
+    assert rows["vidstab"]["jitter_px"] < rows["input"]["jitter_px"]
+
+
+def test_missing_video_is_one_line_error(tmp_path, capsys):
+    code = main(["bench", str(tmp_path / "absent.mp4"), "--modes", "none", "--peers", "none",
+                 "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.strip().splitlines() == [f"ffviz: error: input file not found: {tmp_path / 'absent.mp4'}"]
+    assert not (tmp_path / "out" / "bench.md").exists()
+
+
+def test_unknown_peer_is_one_line_error(tiny_clip, tmp_path, capsys):
+    assert main(["bench", str(tiny_clip), "--peers", "vidstab,handbrake", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "ffviz: error: --peers: unknown handbrake (choose from vidstab, deshake, opencv)"]
+
+
+def test_peak_memory_is_the_childs_own():
+    # Ballast in this process: a child forked straight from it would report at least this much.
+    ballast = b"x" * (300 * MiB)
+    big = bench.run_measured([sys.executable, "-c", "data = b'x' * (200 * 2**20)"])
+    small = bench.run_measured([sys.executable, "-c", "pass"])
+    assert len(ballast) == 300 * MiB
+    assert big.returncode == 0 and small.returncode == 0
+    assert big.peak_rss_bytes >= 200 * MiB
+    assert small.peak_rss_bytes < 50 * MiB
+    assert big.seconds > 0 and big.cpu_seconds > 0
+
+
+def test_run_measured_reports_failures():
+    failed = bench.run_measured([sys.executable, "-c", "import sys; print('working'); sys.exit('boom: bad input')"])
+    assert failed.returncode == 1 and failed.output_tail == "boom: bad input"
+    killed = bench.run_measured([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
+    assert killed.returncode == 128 + 9
+    missing = bench.run_measured(["/nonexistent/program"])
+    assert missing.returncode == 127 and "cannot run /nonexistent/program" in missing.output_tail
+
+
+def test_schedule_interleaves_and_rotates_methods():
+    visits = list(bench.schedule(repeats=2, n_clips=3, n_methods=3))
+    assert [(repeat, clip) for repeat, clip, _ in visits] == [(r, c) for r in range(2) for c in range(3)]
+    for _, _, order in visits:
+        assert sorted(order) == [0, 1, 2]
+        assert order == order[:1] + [(order[0] + i) % 3 for i in range(1, 3)]  # a rotation of the method list
+    assert Counter(order[0] for _, _, order in visits) == {0: 2, 1: 2, 2: 2}  # each method goes first as often
+
+
+def test_stream_frames_renders_a_shaky_clip_lazily():
+    config = synthetic.SyntheticConfig(width=320, height=180, n_frames=40, pan_px_per_frame=0.0, moving_object=False,
+                                       blurred_frames=(), jitter_px=6.0, seed=3)
+    frames = synthetic.stream_frames(config)
+    first = next(frames)  # lazily: one frame rendered, the rest not yet
+    rest = list(frames)
+    assert first.shape == (180, 320, 3) and first.dtype.name == "uint8" and len(rest) == 39
+    again = list(synthetic.stream_frames(config))
+    assert all((a == b).all() for a, b in zip([first] + rest, again))  # deterministic given the seed
+    grey = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY).astype(np.float64) for f in [first] + rest]
+    shifts = [np.hypot(*cv2.phaseCorrelate(a, b)[0]) for a, b in zip(grey, grey[1:])]
+    assert np.median(shifts) > 2.0  # the camera shakes between frames (without jitter: 0.2 px, the slow drift)
+    with pytest.raises(ValueError, match="pan_px_per_frame=0"):
+        next(synthetic.stream_frames(synthetic.SyntheticConfig(n_frames=5)))
