@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from pipeline import completion, deblur, synthetic, warping
+from pipeline.neighbours import WarpedNeighbour, warp_neighbours
 from pipeline.synthetic import psnr
 
 WIDTH, HEIGHT, N_FRAMES = 640, 360, 30
@@ -45,7 +46,7 @@ class Case:
     frames: dict[int, np.ndarray]
     orig_from_stab: np.ndarray
     stabilized: warping.WarpResult
-    neighbours: list[completion.WarpedNeighbour]
+    neighbours: list[WarpedNeighbour]
     truth: np.ndarray
     judged: np.ndarray  # pixels frame t covers whose truth is inside the world canvas
     ghost_zone: np.ndarray  # a neighbour shows the object there, frame t does not (object grown by 12 px)
@@ -62,7 +63,7 @@ def make_case(video: synthetic.SyntheticVideo, t: int, radius: int = 6) -> Case:
     orig_from_stab = np.linalg.inv(stab_from_orig)
     stabilized = warping.warp_frame(video.frames[t], orig_from_stab)
     others = {i: rgb for i, rgb in frames.items() if i != t}
-    neighbours = completion.warp_neighbours(others, t, video.curr_from_prev, orig_from_stab)
+    neighbours = warp_neighbours(others, t, video.curr_from_prev, orig_from_stab)
     truth = video.render_view(t, stab_from_orig)
     judged = ~stabilized.missing & video.view_coverage(t, stab_from_orig)
 

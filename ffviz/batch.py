@@ -138,7 +138,9 @@ def stabilize_one(job: VideoJob, segment_frames: int = 0, mapper: segments.Mappe
                                   mapper=mapper or segments.serial_map, observer=observer, overwrite=True,
                                   crf=job.crf)
         else:
-            report = stab.stabilize(job.input, job.output, job.config, observer=observer, overwrite=True, crf=job.crf)
+            # One core per Ray task (num_cpus=1): the task's frames are rendered on one thread.
+            report = stab.stabilize(job.input, job.output, job.config, observer=observer, overwrite=True, crf=job.crf,
+                                    workers=1)
         _write_marker(job)
     except Exception as error:  # noqa: BLE001 - reported in the summary, the other videos go on
         if recorder is not None:

@@ -72,6 +72,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+import threading
 from typing import Mapping, Sequence
 
 import cv2
@@ -79,7 +80,7 @@ import numpy as np
 from numba import njit
 
 from pipeline import geometry, smoothing
-from pipeline.completion import WarpedNeighbour, warp_neighbours
+from pipeline.neighbours import WarpedNeighbour, warp_neighbours
 from pipeline.mosaic import intensity
 
 # Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
@@ -170,20 +171,24 @@ class EnergyCache:
 
     def __init__(self) -> None:
         self._maps: dict[int, np.ndarray] = {}
+        self._lock = threading.Lock()  # frames are rendered on several threads (pipeline/parallel.py)
 
     def get(self, index: int, rgb: np.ndarray) -> np.ndarray:
-        energy = self._maps.get(index)
-        if energy is None:
+        with self._lock:
+            energy = self._maps.get(index)
+        if energy is None:  # two threads may both compute it: same values, no harm
             full = gradient_energy(rgb)
             height, width = full.shape
             size = (max(round(width * ENERGY_SCALE), 1), max(round(height * ENERGY_SCALE), 1))
             energy = cv2.resize(full, size, interpolation=cv2.INTER_AREA)
-            self._maps[index] = energy
+            with self._lock:
+                self._maps[index] = energy
         return energy
 
     def forget_before(self, index: int) -> None:
-        for old in [i for i in self._maps if i < index]:
-            del self._maps[old]
+        with self._lock:
+            for old in [i for i in self._maps if i < index]:
+                del self._maps[old]
 
 
 def window_blurriness(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: np.ndarray, *,
@@ -314,7 +319,8 @@ def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, fr
     """
     frames = {i: rgb for i, rgb in frames.items() if abs(i - t) <= config.radius}
     if cache is not None:
-        cache.forget_before(t - config.radius)
+        # A few frames of slack: frames are rendered a little out of order on several threads.
+        cache.forget_before(t - config.radius - 8)
     measured = window_blurriness(frames, t, curr_from_prev, cache=cache)
     sharper = {o for o, ratio in measured.ratios.items() if ratio > config.min_ratio}
     neighbours = [n for n in warped if n.offset in sharper]
@@ -327,7 +333,7 @@ def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, fr
 # ---------------------------------------------------------------------------------------------- internals
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _accumulate(accumulated: np.ndarray, total: np.ndarray, rgb: np.ndarray, error: np.ndarray, valid: np.ndarray,
                 ratio: np.float32, alpha: np.float32) -> None:
     """Eq. 30's sums in place: accumulated += w * I_t', total += w, with w of eq. 31 where ``valid``."""

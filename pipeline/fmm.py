@@ -94,7 +94,7 @@ class MotionInpaintResult:
 # Compiled kernels
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item: int) -> int:
     i = size
     while i > 0:
@@ -109,7 +109,7 @@ def _heap_push(keys: np.ndarray, items: np.ndarray, size: int, key: float, item:
     return size + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> tuple[float, int, int]:
     """Remove the smallest entry: (key, item, new size)."""
     top_key = keys[0]
@@ -134,7 +134,7 @@ def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> tuple[float, in
     return top_key, top_item, size
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _eikonal(state: np.ndarray, arrival: np.ndarray, y: int, x: int) -> float:
     """Upwind solution of |grad T| = 1 at (y, x) from its frozen 4-neighbours (eq. 27)."""
     h, w = state.shape
@@ -155,7 +155,7 @@ def _eikonal(state: np.ndarray, arrival: np.ndarray, y: int, x: int) -> float:
     return 0.5 * (a + b + np.sqrt(2.0 - (a - b) * (a - b)))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _march(state: np.ndarray, arrival: np.ndarray) -> np.ndarray:
     """Fast Marching in place on state/arrival; returns the flat indices of the INSIDE pixels in visiting order.
 
@@ -210,7 +210,7 @@ def _march(state: np.ndarray, arrival: np.ndarray) -> np.ndarray:
     return visits[:n_visited]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _colour_image(rgb: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """The neighbour as float32 RGB with NaN where it has no content, so a bilinear sample touching it is NaN."""
     h, w = valid.shape
@@ -222,7 +222,7 @@ def _colour_image(rgb: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _bilinear(image: np.ndarray, y0: int, x0: int, fy: float, fx: float) -> tuple[float, float, float]:
     """RGB at (y0 + fy, x0 + fx) from the 2x2 footprint at (y0, x0); NaN when it leaves the image or touches NaN."""
     h, w = image.shape[0], image.shape[1]
@@ -238,7 +238,7 @@ def _bilinear(image: np.ndarray, y0: int, x0: int, fy: float, fx: float) -> tupl
     return r, g, b
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _inpaint_in_order(flow: np.ndarray, has_flow: np.ndarray, visits: np.ndarray, origin_y: int, origin_x: int,
                       colour: np.ndarray, off_y: np.ndarray, off_x: np.ndarray, off_weight: np.ndarray,
                       eps: float, use_colour: bool) -> None:
@@ -297,7 +297,7 @@ def _inpaint_in_order(flow: np.ndarray, has_flow: np.ndarray, visits: np.ndarray
         has_flow[py, px] = True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _known_flow(flow: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """Full-frame starting outputs: flow on known pixels (NaN elsewhere), arrival 0 / inf; False if a known flow is not finite."""
     h, w = known.shape
@@ -318,7 +318,7 @@ def _known_flow(flow: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.nda
     return out, arrival, finite
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _initial_state(known: np.ndarray, region: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(state, arrival) for marching: KNOWN at 0, INSIDE (region minus known) at inf, WALL elsewhere."""
     h, w = known.shape

@@ -103,7 +103,7 @@ def alignment_error(target: np.ndarray, target_valid: np.ndarray, neighbour: np.
     that shares much of the frame (usually the nearest, most useful one) below one that barely overlaps.
     """
     # Every other pixel of every other row: a quarter of the work, the same mean within noise.
-    return _mean_abs_difference(intensity(target[::2, ::2]), target_valid[::2, ::2], neighbour[::2, ::2],
+    return mean_abs_difference(intensity(target[::2, ::2]), target_valid[::2, ::2], neighbour[::2, ::2],
                                 neighbour_valid[::2, ::2], min_common_fraction)
 
 
@@ -111,14 +111,16 @@ def rank_neighbours(target: np.ndarray, target_valid: np.ndarray, neighbours: Se
                     neighbour_valid: Sequence[np.ndarray], time_offsets: Sequence[int] | None = None) -> list[int]:
     """Indices of ``neighbours`` by alignment error, best first; ties go to the nearer in time, then the lower index."""
     target_intensity = intensity(target)
-    errors = [_mean_abs_difference(target_intensity, target_valid, n, v, LocalFlowConfig.min_common_fraction)
+    errors = [mean_abs_difference(target_intensity, target_valid, n, v, LocalFlowConfig.min_common_fraction)
               for n, v in zip(neighbours, neighbour_valid)]
     distance = [abs(int(o)) for o in time_offsets] if time_offsets is not None else [0] * len(errors)
     return sorted(range(len(errors)), key=lambda i: (errors[i], distance[i], i))
 
 
-def _mean_abs_difference(target_intensity: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarray,
-                         neighbour_valid: np.ndarray, min_common_fraction: float) -> float:
+def mean_abs_difference(target_intensity: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarray,
+                        neighbour_valid: np.ndarray,
+                        min_common_fraction: float = LocalFlowConfig.min_common_fraction) -> float:
+    """Eq. 23's mean over the common area of an intensity image and an RGB neighbour; +inf when it is tiny."""
     common = target_valid & neighbour_valid
     if np.count_nonzero(common) < min_common_fraction * common.size:
         return float("inf")

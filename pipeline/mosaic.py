@@ -112,19 +112,32 @@ def consistent_mosaic(
     coverage = np.zeros((height, width), np.uint8)
     for valid in neighbour_valid:
         coverage += valid
+    # Gather only the missing pixels, as (n, m) samples instead of n full frames (np.take on flat indices is
+    # several times faster than boolean indexing of (H, W, 3) arrays).
+    flat = np.flatnonzero(missing)
+    colours = np.stack([np.take(image.reshape(-1, 3), flat, axis=0) for image in neighbours]) if neighbours else None
+    valid = np.stack([np.take(v.reshape(-1), flat) for v in neighbour_valid]) if neighbours else None
+    return mosaic_from_samples(target, missing, colours, valid, config, coverage=coverage)
+
+
+def mosaic_from_samples(target: np.ndarray, missing: np.ndarray, colours: np.ndarray | None, valid: np.ndarray | None,
+                        config: MosaicConfig = MosaicConfig(), *, coverage: np.ndarray | None = None) -> MosaicResult:
+    """Eqs. 20-22 from the neighbours' samples at the missing pixels only (row-major order, as np.nonzero gives
+    them): ``colours`` (n, m, 3) uint8 and ``valid`` (n, m) bool, or None without neighbours. So the neighbours
+    need never be warped over the whole frame. ``coverage``: the full map if known; else it is counted at the
+    missing pixels only (0 elsewhere)."""
+    height, width = missing.shape
     frame = target.copy()
     variance = np.full((height, width), np.nan, np.float32)
     accepted = np.zeros((height, width), bool)
-
-    ys, xs = np.nonzero(missing)
-    if len(ys) == 0 or not neighbours:
+    flat = np.flatnonzero(missing)
+    if coverage is None:
+        coverage = np.zeros((height, width), np.uint8)
+        if valid is not None and len(flat):
+            coverage.reshape(-1)[flat] = valid.sum(axis=0)
+    if len(flat) == 0 or colours is None or len(colours) == 0:
         return MosaicResult(frame, variance, accepted, missing.copy(), coverage)
 
-    # Gather only the missing pixels, as (n, m) samples instead of n full frames (np.take on flat indices is
-    # several times faster than boolean indexing of (H, W, 3) arrays).
-    flat = ys * width + xs
-    colours = np.stack([np.take(image.reshape(-1, 3), flat, axis=0) for image in neighbours])  # (n, m, 3) uint8
-    valid = np.stack([np.take(v.reshape(-1), flat) for v in neighbour_valid])  # (n, m) bool
     count = valid.sum(axis=0)
     judged = count >= config.min_neighbours
 

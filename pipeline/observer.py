@@ -66,6 +66,13 @@ def null_progress(description: str, total: int | None) -> Progress:
     return NullProgress()
 
 
+def is_null(observer: Observer) -> bool:
+    """Whether ``observer`` looks at nothing (so per-frame results need not be kept for it)."""
+    if isinstance(observer, Observers):
+        return all(is_null(o) for o in observer.observers)
+    return type(observer) is NullObserver
+
+
 class Observers:
     """Fans every call out to several observers, in order."""
 

@@ -95,8 +95,8 @@ def render_segment(path: Path, config: stab.StabilizeConfig, frames: range, curr
                    smoothed: smoothing.SmoothingResult, orig_from_out: np.ndarray) -> RenderedSegment:
     """Pass 2 over one segment; the window reads ``render_radius(config)`` frames beyond each end."""
     collector = _SegmentCollector()
-    stab._render(FileSource(path), None, curr_from_prev, smoothed, orig_from_out, config, observer=collector,
-                 progress=null_progress, total=len(frames), crf=0, frames=frames)
+    stab.render(FileSource(path), None, curr_from_prev, smoothed, orig_from_out, config, observer=collector,
+                progress=null_progress, total=len(frames), crf=0, frames=frames)
     return RenderedSegment(frames, collector.pts, collector.times_s, collector.output)
 
 
@@ -126,14 +126,14 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
     for frame, message in warnings:
         observer.on_warning(None if frame is None else Stamp(frame, motion_pass.times_s[frame]), message)
     if n_frames == 1:
-        stab._warn(warnings, observer, "only one frame: there is no motion to smooth, written as it is")
+        stab.add_warning(warnings, observer, "only one frame: there is no motion to smooth, written as it is")
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
                                 width=info.width, height=info.height)
     observer.on_stage("smoothing", None, smoothed)
     orig_from_out, crop, crop_warning = stab.output_transforms(smoothed.orig_from_stab, config.mode,
                                                                info.width, info.height)
     if crop_warning:
-        stab._warn(warnings, observer, crop_warning)
+        stab.add_warning(warnings, observer, crop_warning)
     if crop is not None:
         observer.on_stage("crop", None, crop)
     seconds_motion = time.perf_counter() - started
@@ -162,7 +162,7 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
         if writer is not None:
             writer.close()
             for message in writer.warnings:
-                stab._warn(warnings, observer, message)
+                stab.add_warning(warnings, observer, message)
     except BaseException:
         if writer is not None:
             writer.abort()

@@ -12,7 +12,7 @@ from typing import Iterator, Protocol, Sequence
 
 import numpy as np
 
-from pipeline import video_io
+from pipeline import parallel, video_io
 from pipeline.errors import InputError
 
 
@@ -70,6 +70,40 @@ class ArraySource:
 
     def drain_warnings(self) -> list[str]:
         return []
+
+
+class PrefetchedSource:
+    """Another source's frames decoded ahead on a background thread (pipeline/parallel.py).
+
+    Decoder warnings travel with the frame they were raised by, so ``drain_warnings`` answers exactly what the
+    wrapped source answers at the same point of a pass.
+    """
+
+    def __init__(self, source: FrameSource, depth: int = 4) -> None:
+        self.source = source
+        self.info = source.info
+        self.depth = depth
+        self._warnings: list[str] = []
+
+    def frames(self) -> Iterator[video_io.Frame]:
+        def decoded() -> Iterator[tuple[video_io.Frame | None, list[str]]]:
+            with one_pass(self.source) as frames:
+                for frame in frames:
+                    yield frame, self.source.drain_warnings()
+            yield None, self.source.drain_warnings()  # raised after the last frame (e.g. a truncated stream)
+
+        ahead = parallel.Prefetch(decoded(), self.depth)
+        try:
+            for frame, warnings in ahead:
+                self._warnings.extend(warnings)
+                if frame is not None:
+                    yield frame
+        finally:
+            ahead.close()
+
+    def drain_warnings(self) -> list[str]:
+        drained, self._warnings = self._warnings, []
+        return drained
 
 
 @contextmanager

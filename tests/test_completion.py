@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import skimage.data
 
-from pipeline import completion
+from pipeline import completion, neighbours
 from pipeline.evaluation import CompletionScores, completion_scores, crop_completion_scores, jittered_crop
 from pipeline.smoothing import SmoothingConfig
 from pipeline.source import FileSource, one_pass
@@ -67,10 +67,10 @@ def _photo(height: int = 180, width: int = 320) -> np.ndarray:
 
 
 def _neighbours(frames: dict[int, np.ndarray], valid: dict[int, np.ndarray] | None = None,
-                ) -> list[completion.WarpedNeighbour]:
+                ) -> list[neighbours.WarpedNeighbour]:
     """Neighbours already in the target's coordinates (identity global motion)."""
     shape = next(iter(frames.values())).shape[:2]
-    return [completion.WarpedNeighbour(offset, rgb, np.ones(shape, bool) if valid is None else valid[offset])
+    return [neighbours.WarpedNeighbour(offset, rgb, np.ones(shape, bool) if valid is None else valid[offset])
             for offset, rgb in sorted(frames.items(), key=lambda item: abs(item[0]))]
 
 

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from ffviz import cli
-from pipeline import completion, deblur, synthetic, warping
+from pipeline import deblur, synthetic, warping
+from pipeline.neighbours import warp_neighbours
 from pipeline.observer import StageCollector
 from pipeline.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
@@ -37,7 +38,7 @@ def placed(video: synthetic.SyntheticVideo, t: int, radius: int = 6):
     stab_from_orig = video.intended_from_frame[t]
     orig_from_stab = np.linalg.inv(stab_from_orig)
     stabilized = warping.warp_frame(video.frames[t], orig_from_stab)
-    neighbours = completion.warp_neighbours({i: f for i, f in frames.items() if i != t}, t, video.curr_from_prev,
+    neighbours = warp_neighbours({i: f for i, f in frames.items() if i != t}, t, video.curr_from_prev,
                                             orig_from_stab)
     truth = video.render_view(t, stab_from_orig)
     judged = ~stabilized.missing & video.view_coverage(t, stab_from_orig)

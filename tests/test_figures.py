@@ -10,7 +10,7 @@ from ffviz import cli, figures
 from ffviz.recorder import RerunRecorder
 from ffviz.rrd import Recording
 from pipeline import deblur, synthetic
-from pipeline.completion import WarpedNeighbour
+from pipeline.neighbours import WarpedNeighbour
 from pipeline.observer import NullObserver, Observers, StageCollector
 from pipeline.stabilize import StabilizeConfig, stabilize
 

@@ -16,7 +16,8 @@ from ffviz.recorder import FILLED_BY_BASE, RerunRecorder
 from ffviz.rrd import Recording
 from ffviz.viewer import rerun_executable
 from pipeline import geometry, synthetic
-from pipeline.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, WarpedNeighbour
+from pipeline.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC
+from pipeline.neighbours import WarpedNeighbour
 from pipeline.observer import Observers, StageCollector, Stamp
 from pipeline.stabilize import StabilizeConfig, stabilize
 

@@ -1,0 +1,138 @@
+"""Neighbouring frames seen in frame t's stabilized coordinates, warped only where they are looked at.
+
+Completion looks at a neighbour in few places: at the missing pixels (mosaic, eqs. 20-22), on a thin band of
+known pixels around them (the local alignment error), inside the small boxes where local flow is computed,
+and at p + F(p) for the local warp (eq. 25). Warping every neighbour over the whole frame (12 neighbours, two
+warps each) was 17% of full mode's time at 640x360 and grows with the frame's area; here each look warps or
+samples just what it needs, straight from the original frame. Deblurring, which does need whole frames, gets
+them on first use (``rgb``, ``valid``), once.
+
+A pixel is valid when every bilinear tap of its sample lies inside the original frame (as the target's own
+missing mask in pipeline/warping.py).
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import cv2
+import numpy as np
+
+from pipeline import smoothing, warping
+
+_MAP_COLUMNS = 4096
+_TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within this of the edge weighs nothing
+
+
+def _as_map(values: np.ndarray) -> np.ndarray:
+    """Coordinates as a 2-D float32 map for cv2.remap, whose sides must stay below 32767 (padded with -2)."""
+    flat = np.asarray(values, np.float32).reshape(-1)
+    columns = min(max(len(flat), 1), _MAP_COLUMNS)
+    rows = -(-len(flat) // columns)
+    padded = np.full(rows * columns, -2.0, np.float32)
+    padded[:len(flat)] = flat
+    return padded.reshape(rows, columns)
+
+
+class WarpedNeighbour:
+    """Neighbour frame t' = t + ``offset`` in frame t's stabilized coordinates.
+
+    Either already warped (``rgb``, ``valid`` given: tests, callers with their own warps) or lazy: the
+    ``original`` frame and the ``other_from_stab`` transform, warped on demand by ``crop``, ``sample`` and the
+    whole-frame ``rgb``/``valid`` (computed once, then reused by every later call).
+    """
+
+    def __init__(self, offset: int, rgb: np.ndarray | None = None, valid: np.ndarray | None = None, *,
+                 original: np.ndarray | None = None, other_from_stab: np.ndarray | None = None) -> None:
+        if (rgb is None) == (original is None) or (rgb is None) != (valid is None) or \
+                (original is None) != (other_from_stab is None):
+            raise ValueError("give either rgb and valid, or original and other_from_stab")
+        self.offset = offset
+        self._rgb, self._valid = rgb, valid
+        self.original = original
+        self.other_from_stab = None if other_from_stab is None else np.asarray(other_from_stab, np.float64)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        image = self._rgb if self._rgb is not None else self.original
+        return image.shape[:2]
+
+    def _warp_whole(self) -> None:
+        if self._rgb is None:
+            warped = warping.warp_frame(self.original, self.other_from_stab)
+            self._rgb, self._valid = warped.frame, ~warped.missing
+
+    @property
+    def rgb(self) -> np.ndarray:
+        """(H, W, 3) uint8, black where not valid."""
+        self._warp_whole()
+        return self._rgb
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(H, W) bool: pixels the neighbour covers."""
+        self._warp_whole()
+        return self._valid
+
+    def crop(self, box: tuple[slice, slice]) -> tuple[np.ndarray, np.ndarray]:
+        """(rgb, valid) of the box only (what ``rgb[box]``, ``valid[box]`` are, without the rest)."""
+        if self._rgb is not None:
+            return self._rgb[box], self._valid[box]
+        rows, cols = box
+        stab_from_box = np.array([[1.0, 0.0, cols.start], [0.0, 1.0, rows.start], [0.0, 0.0, 1.0]])
+        size = (cols.stop - cols.start, rows.stop - rows.start)
+        orig_from_box = self.other_from_stab @ stab_from_box
+        rgb = warping.warp(self.original, orig_from_box, size)
+        coverage = warping.warp(np.full(self.original.shape[:2], 255, np.uint8), orig_from_box, size)
+        missing = coverage < 255
+        rgb[missing] = 0
+        return rgb, ~missing
+
+    def sample(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bilinear samples at stabilized points (float arrays of one shape): (colours (..., 3) uint8,
+        valid (...) bool); invalid samples are black."""
+        shape = np.shape(x)
+        x, y = _as_map(x), _as_map(y)
+        if x.size == 0:
+            return np.zeros(shape + (3,), np.uint8), np.zeros(shape, bool)
+        if self._rgb is not None:
+            colours = cv2.remap(self._rgb, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            coverage = cv2.remap(self._valid.astype(np.uint8) * 255, x, y, cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_CONSTANT)
+            valid = coverage == 255
+        else:
+            m = self.other_from_stab
+            w = m[2, 0] * x + m[2, 1] * y + m[2, 2]
+            src_x = ((m[0, 0] * x + m[0, 1] * y + m[0, 2]) / w).astype(np.float32)
+            src_y = ((m[1, 0] * x + m[1, 1] * y + m[1, 2]) / w).astype(np.float32)
+            colours = cv2.remap(self.original, src_x, src_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            height, width = self.original.shape[:2]
+            valid = ((src_x > -_TAP_SLACK) & (src_x < width - 1 + _TAP_SLACK)
+                     & (src_y > -_TAP_SLACK) & (src_y < height - 1 + _TAP_SLACK))
+        count = int(np.prod(shape))
+        colours = colours.reshape(-1, 3)[:count]
+        valid = valid.reshape(-1)[:count]
+        colours[~valid] = 0
+        return colours.reshape(shape + (3,)), valid.reshape(shape)
+
+    def at(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(colours (m, 3), valid (m,)) at integer pixels."""
+        if self._rgb is not None:
+            return self._rgb[ys, xs], self._valid[ys, xs]
+        return self.sample(xs.astype(np.float32), ys.astype(np.float32))
+
+
+def warp_neighbours(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: np.ndarray,
+                    orig_from_stab_t: np.ndarray) -> list[WarpedNeighbour]:
+    """Original neighbour frames {t': rgb} as lazy neighbours in frame t's stabilized coordinates, nearest first.
+
+    A neighbour's pixel for stabilized point p of frame t is at t'_from_t @ S_t p; the chain t'_from_t is
+    at most ``radius`` inter-frame transforms long.
+    """
+    if not frames:
+        return []
+    first, last = min(frames), max(frames)
+    t_from = smoothing.neighbour_transforms(curr_from_prev, t, min(first, t), max(last, t))
+    return [WarpedNeighbour(t_other - t, original=frames[t_other],
+                            other_from_stab=np.linalg.inv(t_from[t_other]) @ orig_from_stab_t)
+            for t_other in sorted(frames, key=lambda i: (abs(i - t), i))]
