@@ -39,7 +39,17 @@ def ordered_map(func: Callable[[T], R], items: Iterable[T], workers: int) -> Ite
     pending: deque[Future[R]] = deque()
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="ffviz-frame") as pool:
         try:
-            for item in items:
+            source = iter(items)
+            while True:
+                try:
+                    item = next(source)
+                except StopIteration:
+                    break
+                except BaseException:
+                    # As a serial map would: every result before the input's failure first, then the failure.
+                    while pending:
+                        yield pending.popleft().result()
+                    raise
                 pending.append(pool.submit(func, item))
                 if len(pending) >= 2 * workers:
                     yield pending.popleft().result()

@@ -84,7 +84,12 @@ def test_rank_breaks_ties_by_distance_in_time(photo):
 # ---------------------------------------------------------------------- local flow
 
 
-def test_recovers_a_known_smooth_flow_on_a_real_photo(photo):
+# (preset, mean EPE bound, EPE bound near the holes); measured medium 0.18 / 0.21 px, fast (the default) 0.39 / 0.52
+FLOW_BOUNDS = [("medium", 0.3, 0.5), ("fast", 0.5, 0.7)]
+
+
+@pytest.mark.parametrize("preset, mean_bound, near_bound", FLOW_BOUNDS)
+def test_recovers_a_known_smooth_flow_on_a_real_photo(photo, preset, mean_bound, near_bound):
     truth = smooth_flow()
     target_valid = np.ones((H, W), bool)
     target_valid[:, :48] = target_valid[:20] = False  # the target's missing area
@@ -93,15 +98,15 @@ def test_recovers_a_known_smooth_flow_on_a_real_photo(photo):
     target = with_holes(resample(photo, truth), target_valid)
     neighbour = with_holes(photo, neighbour_valid)
 
-    result = local_flow(target, target_valid, neighbour, neighbour_valid)
+    result = local_flow(target, target_valid, neighbour, neighbour_valid, LocalFlowConfig(dis_preset=preset))
 
     assert result.flow.shape == (H, W, 2) and result.flow.dtype == np.float32
-    # Mean end-point error over the common area (measured ~0.18 px with DIS medium; ~0.43 with ultrafast).
-    assert epe(result.flow, truth, result.common) < 0.3
+    # Mean end-point error over the common area (~0.43 px with ultrafast).
+    assert epe(result.flow, truth, result.common) < mean_bound
     # Next to the target's holes, where motion inpainting starts, the black border must not drag the flow
-    # (measured ~0.21 px; ~1.3 px with the holes left black).
+    # (~1.3 px with DIS medium and the holes left black).
     near_holes = cv2.distanceTransform(target_valid.astype(np.uint8), cv2.DIST_L2, 5) < 24
-    assert epe(result.flow, truth, result.common & near_holes) < 0.5
+    assert epe(result.flow, truth, result.common & near_holes) < near_bound
 
 
 @pytest.mark.parametrize("method", ["farneback", "lk"])
