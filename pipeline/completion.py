@@ -40,7 +40,8 @@ error breaking ties between t-k and t+k (``neighbour_order`` reports that order)
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Sequence
 
 import cv2
@@ -52,6 +53,7 @@ from pipeline.neighbours import WarpedNeighbour
 # What filled each pixel (CompletionResult.source).
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK = 0, 1, 2, 3
 SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback")
+# Distances in pixels of the local flow's working resolution (see CompletionConfig.flow_max_side).
 NEAR_MISSING_PX = 12  # motion inpainting works within this distance of the missing area (> flow's erosion)
 RESCUE_NEAR_MISSING_PX = 40  # large motions the flow missed are searched for this close to the missing area
 
@@ -66,13 +68,16 @@ class CompletionConfig:
     # A moving candidate replaces a mosaic pixel when its local alignment error is lower than that of the
     # static scene (no local motion) by more than this (intensity, 0..255).
     mosaic_check_margin: float = 5.0
-    # Flows are computed in boxes around the clusters of pixels needing a local warp, grown by this margin (px);
-    # None: over the whole frame. The margin is DIS's context: with 64 px its coarsest pyramid level lost an
-    # object's 20-50 px motion (synthetic rocket scene -3.5 dB against whole-frame flows); 96 px is within
-    # 0.4 dB of them on that scene and equal or better on three others, at a third of the area.
+    # Flows are computed in boxes around the clusters of pixels needing a local warp, grown by this margin (px
+    # of the flow's working resolution); None: over the whole frame. The margin is DIS's context: with 64 px
+    # its coarsest pyramid level lost an object's 20-50 px motion (synthetic rocket scene -3.5 dB against
+    # whole-frame flows); 96 px is within 0.4 dB of them on that scene and equal or better on three others,
+    # at a third of the area.
     flow_margin_px: int | None = 96
-    # Local flow and motion inpainting run at this fraction of the resolution (the flow is upsampled after).
-    flow_scale: float = 1.0
+    # Local flow and motion inpainting run on frames scaled down to this longest side (the flow is upsampled
+    # after; the local warp samples full-resolution neighbours), as motion estimation does: at 1080p that is
+    # a ninth of the pixels. None: full resolution.
+    flow_max_side: int | None = 640
     confirm_difference: float | None = 20.0
     mosaic: mosaic.MosaicConfig = field(default_factory=mosaic.MosaicConfig)
     flow: local_flow.LocalFlowConfig = field(default_factory=local_flow.LocalFlowConfig)
@@ -83,22 +88,78 @@ class CompletionConfig:
             raise ValueError(f"completion radius must be >= 0, not {self.radius}")
         if self.max_warp_neighbours < 0:
             raise ValueError(f"max_warp_neighbours must be >= 0, not {self.max_warp_neighbours}")
-        if not 0 < self.flow_scale <= 1:
-            raise ValueError(f"flow_scale must be in (0, 1], not {self.flow_scale}")
+        if self.flow_max_side is not None and self.flow_max_side < 32:
+            raise ValueError(f"flow_max_side must be at least 32 px, not {self.flow_max_side}")
         if self.residual_radius < 0:
             raise ValueError(f"residual_radius must be >= 0, not {self.residual_radius}")
 
 
 @dataclass(frozen=True)
+class FlowPiece:
+    """Local flow and its motion inpainting inside one box, at ``scale`` of the frame's resolution."""
+
+    box: tuple[slice, slice]  # in full-resolution frame coordinates
+    scale: float
+    flow: local_flow.LocalFlowResult  # at the working resolution of the box
+    inpainted: fmm.MotionInpaintResult
+
+    def inpainted_flow_at(self, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+        """(m, 2) float32 full-resolution flow at full-frame pixels inside the box: bilinear between the
+        defined coarse vectors only (exact at scale 1); NaN where there is none."""
+        rows, cols = self.box
+        # Pixel centres: full-resolution (x + 0.5) is working (x + 0.5) * scale.
+        u = (xs - cols.start + 0.5) * self.scale - 0.5
+        v = (ys - rows.start + 0.5) * self.scale - 0.5
+        flow = self.inpainted.flow
+        defined = np.isfinite(flow[..., 0]).astype(np.float32)
+        weighted = np.dstack([np.nan_to_num(flow) * defined[..., None], defined])
+        sampled = _remap_points(weighted, u, v)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = sampled[:, :2] / sampled[:, 2:3] / np.float32(self.scale)
+        out[sampled[:, 2] < 1e-3] = np.nan
+        return out.astype(np.float32)
+
+
+def _remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear samples of a float image at points (m,), (m, channels); clamped to the edge."""
+    from pipeline.neighbours import _as_map  # one implementation of cv2.remap's map-size workaround
+
+    count = len(x)
+    sampled = cv2.remap(image, _as_map(x), _as_map(y), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return sampled.reshape(-1, image.shape[2])[:count]
+
+
+@dataclass
 class NeighbourFill:
-    """One neighbour of the local-warp stage: its flow, the inpainted flow, what it could and did fill."""
+    """One neighbour of the local-warp stage: its flow, the inpainted flow, what it could and did fill.
+
+    The flows live in ``pieces`` (boxes at the flow's working resolution); ``flow`` and ``inpainted`` are the
+    full-frame views of them, made on first use (the debugger's), never by the pipeline itself."""
 
     offset: int
     alignment_error: float  # eq. 23 over the whole common area
-    flow: local_flow.LocalFlowResult
-    inpainted: fmm.MotionInpaintResult
+    pieces: list[FlowPiece]
+    shape: tuple[int, int]
     filled: np.ndarray  # bool: pixels this neighbour's local warp filled
     reached: np.ndarray | None = None  # bool: missing pixels its local warp had a sample for
+
+    @cached_property
+    def flow(self) -> local_flow.LocalFlowResult:
+        return _full_frame(self.pieces, self.shape)[0]
+
+    @cached_property
+    def inpainted(self) -> fmm.MotionInpaintResult:
+        return _full_frame(self.pieces, self.shape)[1]
+
+    def inpainted_flow_at(self, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+        """(m, 2) float32 inpainted flow at full-frame pixels; NaN outside every box or where there is none."""
+        out = np.full((len(ys), 2), np.nan, np.float32)
+        for piece in self.pieces:
+            rows, cols = piece.box
+            inside = (ys >= rows.start) & (ys < rows.stop) & (xs >= cols.start) & (xs < cols.stop)
+            if inside.any():
+                out[inside] = piece.inpainted_flow_at(ys[inside], xs[inside])
+        return out
 
 
 @dataclass(frozen=True)
@@ -203,10 +264,8 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
         wanted = remaining[ys, xs] | checked
         if wanted.any():
             order, errors = _priority(target, known, neighbours, config.max_warp_neighbours)
-            wanted_image = np.zeros((height, width), bool)
-            wanted_image[ys[wanted], xs[wanted]] = True
-            fills, candidates = _local_warps(target, known, missing, neighbours, order, errors, ys, xs, at_missing,
-                                             local_error, _work_boxes(wanted_image, config.flow_margin_px), config)
+            fills, candidates = _local_warps(target, known, missing, neighbours, order, errors, ys, xs, wanted,
+                                             at_missing, local_error, config)
         if fills:
             chosen = _best_candidate(candidates)
             take = wanted & (chosen >= 0)
@@ -243,9 +302,12 @@ def _priority(target: np.ndarray, known: np.ndarray, neighbours: Sequence[Warped
     errors = [float("nan")] * len(neighbours)
     order: list[int] = []
     usable = 0
-    grid_y, grid_x = np.mgrid[0:target.shape[0]:2, 0:target.shape[1]:2].astype(np.float32)
-    target_grid = mosaic.intensity(target[::2, ::2])  # every other pixel of every other row, as in eq. 23's
-    known_grid = known[::2, ::2]  # local_flow.alignment_error: the same mean within noise, a quarter of the work
+    # A grid about 320 pixels wide (every other pixel at 640x360, as local_flow.alignment_error): the same
+    # mean within noise, a fraction of the work.
+    step = max(2, max(target.shape[:2]) // 320)
+    grid_y, grid_x = np.mgrid[0:target.shape[0]:step, 0:target.shape[1]:step].astype(np.float32)
+    target_grid = mosaic.intensity(target[::step, ::step])
+    known_grid = known[::step, ::step]
     for _, group in itertools.groupby(_by_distance(neighbours), key=lambda i: abs(neighbours[i].offset)):
         group = list(group)
         if usable < needed:
@@ -259,18 +321,22 @@ def _priority(target: np.ndarray, known: np.ndarray, neighbours: Sequence[Warped
 
 
 def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
-                 order: list[int], errors: list[float], ys: np.ndarray, xs: np.ndarray,
-                 at_missing: list[tuple[np.ndarray, np.ndarray]], local_error: _LocalError,
-                 works: list[tuple[slice, slice]], config: CompletionConfig,
+                 order: list[int], errors: list[float], ys: np.ndarray, xs: np.ndarray, want: np.ndarray,
+                 at_missing: list[tuple[np.ndarray, np.ndarray]], local_error: _LocalError, config: CompletionConfig,
                  ) -> tuple[list[NeighbourFill], list[_Candidate]]:
     """Steps 2-4 for the nearest ``max_warp_neighbours`` neighbours: local flow, motion inpainting, local warp.
 
-    Flow and motion inpainting run inside the ``works`` boxes only (results are pasted into full-frame arrays);
-    the local warp is sampled at the pixels to fill and on the local error's band.
+    ``want``: which of the pixels to fill (ys, xs) need it. Flow and motion inpainting run inside boxes around
+    them only (``_work_boxes``; results are pasted into full-frame arrays); the local warp is sampled at the
+    pixels to fill and on the local error's band.
     """
     height, width = missing.shape
-    near_missing = _dilate(missing, NEAR_MISSING_PX)
-    rescue_focus = _dilate(missing, RESCUE_NEAR_MISSING_PX)
+    scale = 1.0 if config.flow_max_side is None else min(1.0, config.flow_max_side / max(height, width))
+    near_missing = _dilate(missing, round(NEAR_MISSING_PX / scale))
+    rescue_focus = _dilate(missing, round(RESCUE_NEAR_MISSING_PX / scale))
+    wanted = np.zeros((height, width), bool)
+    wanted[ys[want], xs[want]] = True
+    works = _work_boxes(wanted, None if config.flow_margin_px is None else round(config.flow_margin_px / scale))
     points_y = np.concatenate([ys, local_error.band_y])
     points_x = np.concatenate([xs, local_error.band_x])
     m = len(ys)
@@ -285,72 +351,52 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
         pieces = []
         for work in works:
             neighbour_rgb, neighbour_valid = neighbour.crop(work)
-            pieces.append((work, *_flow_in_box(target[work], known[work], neighbour_rgb, neighbour_valid,
-                                               rescue_focus[work], near_missing[work], config)))
-        flow, inpainted = _full_frame(pieces, (height, width))
-        colours, landed, motion = _local_warp(inpainted.flow, neighbour, points_y, points_x)
+            pieces.append(_flow_in_box(work, target[work], known[work], neighbour_rgb, neighbour_valid,
+                                       rescue_focus[work], near_missing[work], scale, config))
+        fill = NeighbourFill(neighbour.offset, errors[i], pieces, (height, width), np.zeros((height, width), bool))
+        colours, landed, motion = _local_warp(fill.inpainted_flow_at(points_y, points_x), neighbour, points_y,
+                                              points_x)
         # A warp whose surroundings cannot be checked ranks after every checked one.
         error = np.nan_to_num(local_error(colours[m:], landed[m:]), nan=255.0)
         sample, moving = colours[:m], motion[:m] > config.moving_px
         confirmed = moving | _seen_by_another(sample, i, at_missing, config.confirm_difference)
         candidates.append(_Candidate(sample, landed[:m], motion[:m], error, confirmed))
-        reached = np.zeros((height, width), bool)
-        reached[ys, xs] = landed[:m]
-        fills.append(NeighbourFill(neighbour.offset, errors[i], flow, inpainted, np.zeros((height, width), bool),
-                                   reached))
+        fill.reached = np.zeros((height, width), bool)
+        fill.reached[ys, xs] = landed[:m]
+        fills.append(fill)
     return fills, candidates
 
 
-def _flow_in_box(target: np.ndarray, known: np.ndarray, neighbour_rgb: np.ndarray, neighbour_valid: np.ndarray,
-                 focus: np.ndarray, near_missing: np.ndarray, config: CompletionConfig,
-                 ) -> tuple[local_flow.LocalFlowResult, fmm.MotionInpaintResult]:
-    """Local flow and its motion inpainting in one box, at ``config.flow_scale`` of the resolution (results
-    brought back to the box's full resolution)."""
-    scale = config.flow_scale
+def _flow_in_box(box: tuple[slice, slice], target: np.ndarray, known: np.ndarray, neighbour_rgb: np.ndarray,
+                 neighbour_valid: np.ndarray, focus: np.ndarray, near_missing: np.ndarray, scale: float,
+                 config: CompletionConfig) -> FlowPiece:
+    """Local flow and its motion inpainting in one box (the arrays are the box's crops), at ``scale`` of the
+    resolution."""
     height, width = known.shape
     size = (max(round(width * scale), 8), max(round(height * scale), 8))
-    if scale == 1.0 or size[0] >= width or size[1] >= height:
-        flow = local_flow.local_flow(target, known, neighbour_rgb, neighbour_valid, config.flow, focus=focus)
-        trusted = flow.common if flow.reliable is None else flow.reliable
-        # Propagate over everything untrusted near the hole: the common area is eroded, so the band between
-        # it and the missing area must be crossed too.
-        inpainted = fmm.inpaint_motion(flow.flow, trusted, neighbour_rgb, neighbour_valid=neighbour_valid,
-                                       region=~trusted & near_missing, config=config.inpaint)
-        return flow, inpainted
+    if size[0] < width and size[1] < height:
+        def shrink(image: np.ndarray) -> np.ndarray:
+            return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
 
-    def shrink(image: np.ndarray) -> np.ndarray:
-        return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+        def shrink_all(mask: np.ndarray) -> np.ndarray:  # a coarse pixel is in only if all its fine pixels are
+            return shrink(mask.astype(np.uint8) * 255) == 255
 
-    def shrink_all(mask: np.ndarray) -> np.ndarray:  # a coarse pixel is in only if all its fine pixels are
-        return shrink(mask.astype(np.uint8) * 255) == 255
+        def shrink_any(mask: np.ndarray) -> np.ndarray:
+            return shrink(mask.astype(np.uint8) * 255) > 0
 
-    def shrink_any(mask: np.ndarray) -> np.ndarray:
-        return shrink(mask.astype(np.uint8) * 255) > 0
-
-    def grow(image: np.ndarray) -> np.ndarray:
-        return cv2.resize(image, (width, height), interpolation=cv2.INTER_NEAREST)
-
-    flow, inpainted = _flow_in_box(shrink(target), shrink_all(known), shrink(neighbour_rgb),
-                                   shrink_all(neighbour_valid), shrink_any(focus), shrink_any(near_missing),
-                                   replace(config, flow_scale=1.0))
-    reliable = None if flow.reliable is None else grow(flow.reliable.astype(np.uint8)).astype(bool)
-    full_flow = local_flow.LocalFlowResult(_grow_flow(flow.flow, (width, height), scale),
-                                           grow(flow.common.astype(np.uint8)).astype(bool), reliable)
-    full_inpainted = fmm.MotionInpaintResult(_grow_flow(inpainted.flow, (width, height), scale),
-                                             grow(inpainted.order), grow(inpainted.arrival) / np.float32(scale),
-                                             grow(inpainted.filled.astype(np.uint8)).astype(bool))
-    return full_flow, full_inpainted
-
-
-def _grow_flow(flow: np.ndarray, size: tuple[int, int], scale: float) -> np.ndarray:
-    """A coarse flow (NaN where there is none) at full resolution: bilinear between defined vectors only."""
-    defined = np.isfinite(flow[..., 0]).astype(np.float32)
-    weighted = np.nan_to_num(flow) * defined[..., None]
-    total = cv2.resize(weighted, size, interpolation=cv2.INTER_LINEAR)
-    weight = cv2.resize(defined, size, interpolation=cv2.INTER_LINEAR)
-    grown = total / np.maximum(weight, 1e-6)[..., None] / np.float32(scale)
-    grown[weight < 1e-3] = np.nan
-    return grown.astype(np.float32)
+        target, neighbour_rgb, known, neighbour_valid = (shrink(target), shrink(neighbour_rgb), shrink_all(known),
+                                                         shrink_all(neighbour_valid))
+        focus, near_missing = shrink_any(focus), shrink_any(near_missing)
+        scale = size[0] / width  # the exact factor along x (y differs by rounding only)
+    else:
+        scale = 1.0
+    flow = local_flow.local_flow(target, known, neighbour_rgb, neighbour_valid, config.flow, focus=focus)
+    trusted = flow.common if flow.reliable is None else flow.reliable
+    # Propagate over everything untrusted near the hole: the common area is eroded, so the band between
+    # it and the missing area must be crossed too.
+    inpainted = fmm.inpaint_motion(flow.flow, trusted, neighbour_rgb, neighbour_valid=neighbour_valid,
+                                   region=~trusted & near_missing, config=config.inpaint)
+    return FlowPiece(box, scale, flow, inpainted)
 
 
 def _work_boxes(wanted: np.ndarray, margin: int | None) -> list[tuple[slice, slice]]:
@@ -381,27 +427,44 @@ def _work_boxes(wanted: np.ndarray, margin: int | None) -> list[tuple[slice, sli
     return [(slice(y0, y1), slice(x0, x1)) for y0, x0, y1, x1 in boxes]
 
 
-def _full_frame(pieces: list[tuple[tuple[slice, slice], local_flow.LocalFlowResult, fmm.MotionInpaintResult]],
-                shape: tuple[int, int]) -> tuple[local_flow.LocalFlowResult, fmm.MotionInpaintResult]:
-    """Results computed inside non-overlapping boxes as full-frame arrays (no flow outside them)."""
+def _full_frame(pieces: list[FlowPiece], shape: tuple[int, int],
+                ) -> tuple[local_flow.LocalFlowResult, fmm.MotionInpaintResult]:
+    """Flow pieces (non-overlapping boxes) as full-frame, full-resolution arrays (no flow outside them)."""
     def paste(values: list[np.ndarray], fill: float | bool) -> np.ndarray:
-        out = np.full(shape + values[0].shape[2:], fill, values[0].dtype)
-        for (work, _, _), piece in zip(pieces, values):
-            out[work] = piece
+        """Per-pixel values (masks, order, arrival): nearest coarse pixel."""
+        out = np.full(shape, fill, values[0].dtype)
+        for piece, value in zip(pieces, values):
+            rows, cols = piece.box
+            size = (cols.stop - cols.start, rows.stop - rows.start)
+            if value.shape != (size[1], size[0]):
+                value = cv2.resize(value.view(np.uint8) if value.dtype == bool else value, size,
+                                   interpolation=cv2.INTER_NEAREST).view(value.dtype)
+            out[rows, cols] = value
         return out
 
-    flows = [flow for _, flow, _ in pieces]
-    inpainted = [result for _, _, result in pieces]
+    def paste_flow(inpainted: bool) -> np.ndarray:
+        out = np.full(shape + (2,), np.nan if inpainted else 0.0, np.float32)
+        for piece in pieces:
+            rows, cols = piece.box
+            if inpainted:
+                ys, xs = np.mgrid[rows, cols]
+                out[rows, cols] = piece.inpainted_flow_at(ys.ravel(), xs.ravel()).reshape(ys.shape + (2,))
+            else:
+                size = (cols.stop - cols.start, rows.stop - rows.start)
+                out[rows, cols] = cv2.resize(piece.flow.flow, size, interpolation=cv2.INTER_LINEAR) / piece.scale
+        return out
+
+    flows = [piece.flow for piece in pieces]
+    inpainted = [piece.inpainted for piece in pieces]
     # One visiting order over all boxes: each box's marching continues after the previous box's.
     orders, visited = [], 0
     for result in inpainted:
         orders.append(np.where(result.order >= 0, result.order + visited, -1).astype(result.order.dtype))
         visited += int(result.order.max(initial=-1)) + 1
+    arrival = [result.arrival / np.float32(piece.scale) for piece, result in zip(pieces, inpainted)]
     reliable = None if flows[0].reliable is None else paste([f.reliable for f in flows], False)
-    return (local_flow.LocalFlowResult(paste([f.flow for f in flows], 0.0), paste([f.common for f in flows], False),
-                                       reliable),
-            fmm.MotionInpaintResult(paste([r.flow for r in inpainted], np.nan), paste(orders, -1),
-                                    paste([r.arrival for r in inpainted], np.inf),
+    return (local_flow.LocalFlowResult(paste_flow(False), paste([f.common for f in flows], False), reliable),
+            fmm.MotionInpaintResult(paste_flow(True), paste(orders, -1), paste(arrival, np.inf),
                                     paste([r.filled for r in inpainted], False)))
 
 
@@ -444,16 +507,16 @@ def _moving_and_better(candidates: list[_Candidate], chosen: np.ndarray, static_
 
 def _local_warp(flow: np.ndarray, neighbour: WarpedNeighbour, ys: np.ndarray, xs: np.ndarray,
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Eq. 25 at pixels (ys, xs): I_t'(p + F(p)) wherever p has a flow landing on neighbour content.
+    """Eq. 25 at pixels (ys, xs) with their inpainted flow ``flow`` (m, 2), NaN where none: I_t'(p + F(p))
+    wherever p has a flow landing on neighbour content.
 
     The neighbour is sampled straight from its original frame (one resampling, not a warp of a warp). Returns
     (colours (m, 3) uint8, landed (m,) bool, |F| (m,) float32, inf where p has no flow).
     """
-    at = flow[ys, xs]
-    has_flow = ~np.isnan(at[:, 0])
-    at = np.where(has_flow[:, None], at, np.float32(0))
-    colours, covered = neighbour.sample(xs + at[:, 0], ys + at[:, 1])
+    has_flow = ~np.isnan(flow[:, 0])
+    flow = np.where(has_flow[:, None], flow, np.float32(0))
+    colours, covered = neighbour.sample(xs + flow[:, 0], ys + flow[:, 1])
     # Only where every bilinear tap was a neighbour pixel: no black bleeding in from its border.
     landed = has_flow & covered
-    motion = np.where(has_flow, np.hypot(at[:, 0], at[:, 1]), np.inf).astype(np.float32)
+    motion = np.where(has_flow, np.hypot(flow[:, 0], flow[:, 1]), np.inf).astype(np.float32)
     return colours, landed, motion

@@ -235,21 +235,22 @@ def alignment_error(target: np.ndarray, neighbour: np.ndarray, valid: np.ndarray
     """(H, W) float32: eq. 29 on low-passed images, max over R, G, B of |G_sigma * (I_t' - I_t)| over ``valid``
     (normalised convolution: pixels outside ``valid`` do not leak in). sigma 0: eq. 29 per channel as written.
 
-    With sigma >= 2 px the low-pass runs at half resolution (what that loses, the low-pass removes anyway).
+    With sigma >= 2 px the low-pass runs at 1/f of the resolution, f the largest power of two <= sigma / 2
+    but at least 2 (the default sigma: f = 2 at 360p, 4 at 1080p): what that loses, the low-pass removes anyway.
     """
     height, width = valid.shape
     weight = valid.astype(np.float32)
     if sigma <= 0:
         difference = cv2.subtract(neighbour, target, dtype=cv2.CV_32F)
     else:
-        half = sigma >= 2.0
-        size = (max(width // 2, 1), max(height // 2, 1))
-        if half:
+        factor = 2 ** max(1, int(math.log2(sigma / 2.0))) if sigma >= 2.0 else 1
+        size = (max(width // factor, 1), max(height // factor, 1))
+        if factor > 1:
             target, neighbour = (cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in (target, neighbour))
             weight = cv2.resize(weight, size, interpolation=cv2.INTER_AREA)
         difference = cv2.subtract(neighbour, target, dtype=cv2.CV_32F)
         difference *= weight[..., None]
-        s = sigma / 2.0 if half else sigma
+        s = sigma / factor
         difference = cv2.GaussianBlur(difference, (0, 0), s, borderType=cv2.BORDER_CONSTANT)
         norm = cv2.GaussianBlur(weight, (0, 0), s, borderType=cv2.BORDER_CONSTANT)
         difference /= np.maximum(norm, 1e-3)[..., None]
