@@ -50,7 +50,6 @@ which is exactly where motion inpainting starts from.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -104,32 +103,16 @@ class LocalFlowResult:
     reliable: np.ndarray | None = None
 
 
-def alignment_error(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarray, neighbour_valid: np.ndarray,
-                    *, min_common_fraction: float = LocalFlowConfig.min_common_fraction) -> float:
-    """Eq. 23 as the mean absolute intensity difference over the common area; +inf when that area is tiny.
-
-    The thesis sums; the mean is used because a sum grows with the overlap, so it would rank a neighbour
-    that shares much of the frame (usually the nearest, most useful one) below one that barely overlaps.
-    """
-    # Every other pixel of every other row: a quarter of the work, the same mean within noise.
-    return mean_abs_difference(intensity(target[::2, ::2]), target_valid[::2, ::2], neighbour[::2, ::2],
-                                neighbour_valid[::2, ::2], min_common_fraction)
-
-
-def rank_neighbours(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[np.ndarray],
-                    neighbour_valid: Sequence[np.ndarray], time_offsets: Sequence[int] | None = None) -> list[int]:
-    """Indices of ``neighbours`` by alignment error, best first; ties go to the nearer in time, then the lower index."""
-    target_intensity = intensity(target)
-    errors = [mean_abs_difference(target_intensity, target_valid, n, v, LocalFlowConfig.min_common_fraction)
-              for n, v in zip(neighbours, neighbour_valid)]
-    distance = [abs(int(o)) for o in time_offsets] if time_offsets is not None else [0] * len(errors)
-    return sorted(range(len(errors)), key=lambda i: (errors[i], distance[i], i))
-
-
 def mean_abs_difference(target_intensity: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarray,
                         neighbour_valid: np.ndarray,
                         min_common_fraction: float = LocalFlowConfig.min_common_fraction) -> float:
-    """Eq. 23's mean over the common area of an intensity image and an RGB neighbour; +inf when it is tiny."""
+    """Eq. 23 (neighbour priority) as the mean absolute intensity difference over the common area of an
+    intensity image and an RGB neighbour; +inf when that area is below ``min_common_fraction`` of the image.
+
+    The thesis sums; the mean is used because a sum grows with the overlap, so it would rank a neighbour
+    that shares much of the frame (usually the nearest, most useful one) below one that barely overlaps.
+    pipeline/completion.py evaluates it on a subsampled grid of each neighbour.
+    """
     common = target_valid & neighbour_valid
     if np.count_nonzero(common) < min_common_fraction * common.size:
         return float("inf")

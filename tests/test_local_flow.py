@@ -6,8 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline import synthetic
-from pipeline.local_flow import LocalFlowConfig, alignment_error, local_flow, rank_neighbours
+from pipeline import completion, synthetic
+from pipeline.local_flow import LocalFlowConfig, local_flow, mean_abs_difference
+from pipeline.mosaic import intensity
+from pipeline.neighbours import WarpedNeighbour
 from pipeline.warping import warp, warp_frame
 
 W, H = 640, 360
@@ -58,10 +60,9 @@ def test_alignment_error_prefers_the_well_aligned_neighbour_whatever_the_overlap
     misaligned_valid = np.zeros((H, W), bool)
     misaligned_valid[:, : W // 8] = True  # a neighbour that barely overlaps
 
-    good = alignment_error(photo, target_valid, aligned, aligned_valid)
-    bad = alignment_error(photo, target_valid, misaligned, misaligned_valid)
+    good = mean_abs_difference(intensity(photo), target_valid, aligned, aligned_valid)
+    bad = mean_abs_difference(intensity(photo), target_valid, misaligned, misaligned_valid)
     assert good < bad
-    assert rank_neighbours(photo, target_valid, [misaligned, aligned], [misaligned_valid, aligned_valid]) == [1, 0]
     # Eq. 23's plain sum would get this backwards: the misaligned neighbour has far fewer pixels to sum over.
     assert good * aligned_valid.sum() > bad * misaligned_valid.sum()
 
@@ -70,15 +71,19 @@ def test_alignment_error_is_infinite_without_common_area(photo):
     valid = np.ones((H, W), bool)
     sliver = np.zeros((H, W), bool)
     sliver[:, :5] = True  # 0.8% of the frame
-    assert alignment_error(photo, valid, photo, sliver) == float("inf")
-    assert alignment_error(photo, valid, photo, valid) == 0.0
+    assert mean_abs_difference(intensity(photo), valid, photo, sliver) == float("inf")
+    assert mean_abs_difference(intensity(photo), valid, photo, valid) == 0.0
 
 
-def test_rank_breaks_ties_by_distance_in_time(photo):
+def test_priority_is_nearest_in_time_first_with_eq_23_breaking_ties(photo):
     valid = np.ones((H, W), bool)
-    same = [photo, photo, photo]
-    assert rank_neighbours(photo, valid, same, [valid] * 3, time_offsets=[-3, 2, -1]) == [2, 1, 0]
-    assert rank_neighbours(photo, valid, same, [valid] * 3) == [0, 1, 2]
+    misaligned = shifted(photo, 3.0, 2.0)
+    neighbours = [WarpedNeighbour(offset, rgb, valid) for offset, rgb in
+                  ((-1, misaligned), (1, photo), (-2, photo), (2, photo), (3, photo))]
+    order, errors = completion._priority(photo, valid, neighbours, needed=4)
+    assert [neighbours[i].offset for i in order] == [1, -1, -2, 2, 3]  # equal errors: t-k first
+    assert errors[1] == 0.0 and errors[0] > 5.0
+    assert np.isnan(errors[4])  # four usable neighbours were ordered before t+3: its error is never measured
 
 
 # ---------------------------------------------------------------------- local flow
