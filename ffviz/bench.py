@@ -73,6 +73,18 @@ sys.exit(code if code >= 0 else 128 - code)
 """
 
 
+def measured_argv(command: Sequence[str], report: Path) -> list[str]:
+    """``command`` run under the measuring launcher, which writes "wall_s cpu_s peak_rss_kib" to ``report``
+    and exits with the command's status (128 + N for signal N)."""
+    return [sys.executable, "-I", "-S", "-c", _LAUNCHER, str(report), *command]
+
+
+def read_measurement(report: Path) -> tuple[float, float, int]:
+    """(wall seconds, CPU seconds, peak RSS bytes) from a launcher's report."""
+    seconds, cpu_seconds, max_rss_kib = report.read_text().split()
+    return float(seconds), float(cpu_seconds), int(max_rss_kib) * 1024  # ru_maxrss is in KiB on Linux
+
+
 def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun:
     """Run a command to its end and measure it: wall and CPU seconds, and peak RSS from its wait4 rusage."""
     with tempfile.TemporaryDirectory(prefix="ffviz-bench-") as tmp:
@@ -80,8 +92,7 @@ def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun
         log_path = Path(tmp) / "log"
         with log_path.open("wb") as log:  # a file, not a pipe: nobody reads while the child runs
             # Own session: Ctrl-C reaches only this process, which then ends the launcher and command together.
-            child = subprocess.Popen([sys.executable, "-I", "-S", "-c", _LAUNCHER, str(report), *command],
-                                     stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd=cwd,
+            child = subprocess.Popen(measured_argv(command, report), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd=cwd,
                                      start_new_session=True)
             try:
                 returncode = child.wait()
@@ -92,11 +103,10 @@ def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun
         text = log_path.read_text("utf-8", "replace")
         if not report.is_file():  # the launcher itself failed
             raise RuntimeError(f"measuring launcher failed (exit {returncode}): {text.strip()[-300:]}")
-        seconds, cpu_seconds, max_rss_kib = report.read_text().split()
+        seconds, cpu_seconds, peak = read_measurement(report)
     lines = [line.strip() for line in text.replace("\r", "\n").splitlines() if line.strip()]
-    return ChildRun(seconds=float(seconds), cpu_seconds=float(cpu_seconds),
-                    peak_rss_bytes=int(max_rss_kib) * 1024,  # ru_maxrss is in KiB on Linux
-                    returncode=returncode, output_tail=lines[-1] if lines else "")
+    return ChildRun(seconds=seconds, cpu_seconds=cpu_seconds, peak_rss_bytes=peak, returncode=returncode,
+                    output_tail=lines[-1] if lines else "")
 
 
 # -- methods -------------------------------------------------------------------------------------------------

@@ -32,6 +32,7 @@ import numpy as np
 import pytest
 
 from ffviz import cli
+from ffviz.bench import measured_argv, read_measurement
 from pipeline import synthetic, video_io
 from tests.test_video_io import mux_sine
 
@@ -299,25 +300,25 @@ class Run:
 
 def run_cli(*args: str, timeout_s: float = 300) -> Run:
     """The CLI as a user runs it: its own process, its exit code, both streams as they come out, and
-    its peak memory (wait4's rusage of that one child)."""
+    its peak memory (wait4's rusage of that one process, taken by ffviz bench's small launcher: a child
+    forked straight from pytest would count pytest's own pages in its peak)."""
     env = {**os.environ, "RERUN_ANALYTICS": "0"}
-    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        process = subprocess.Popen([sys.executable, "-m", "ffviz.cli", *args], cwd=ROOT, env=env,
-                                   stdin=subprocess.DEVNULL, stdout=out, stderr=err)
-        deadline = time.monotonic() + timeout_s
-        while True:
-            pid, status, usage = os.wait4(process.pid, os.WNOHANG)
-            if pid:
-                break
-            if time.monotonic() > deadline:
-                process.kill()
-                process.wait()
-                pytest.fail(f"ffviz {' '.join(args)} ran over {timeout_s} s")
-            time.sleep(0.05)
-        process.returncode = os.waitstatus_to_exitcode(status)
+    with tempfile.TemporaryDirectory() as tmp, tempfile.TemporaryFile("w+") as out, \
+            tempfile.TemporaryFile("w+") as err:
+        report = Path(tmp) / "rusage"
+        process = subprocess.Popen(measured_argv([sys.executable, "-m", "ffviz.cli", *args], report), cwd=ROOT,
+                                   env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                                   start_new_session=True)
+        try:
+            returncode = process.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+            pytest.fail(f"ffviz {' '.join(args)} ran over {timeout_s} s")
         out.seek(0)
         err.seek(0)
-        return Run(process.returncode, out.read(), err.read(), usage.ru_maxrss / 1024)
+        _, _, peak = read_measurement(report)
+        return Run(returncode, out.read(), err.read(), peak / 2**20)
 
 
 def run_in_process(capfd: pytest.CaptureFixture[str], *args: str) -> Run:
