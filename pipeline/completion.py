@@ -48,7 +48,7 @@ import cv2
 import numpy as np
 
 from pipeline import fallback, fmm, local_flow, mosaic
-from pipeline.neighbours import WarpedNeighbour
+from pipeline.neighbours import WarpedNeighbour, remap_points
 
 # What filled each pixel (CompletionResult.source).
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK = 0, 1, 2, 3
@@ -113,20 +113,11 @@ class FlowPiece:
         flow = self.inpainted.flow
         defined = np.isfinite(flow[..., 0]).astype(np.float32)
         weighted = np.dstack([np.nan_to_num(flow) * defined[..., None], defined])
-        sampled = _remap_points(weighted, u, v)
+        sampled = remap_points(weighted, u, v, cv2.BORDER_REPLICATE)
         with np.errstate(invalid="ignore", divide="ignore"):
             out = sampled[:, :2] / sampled[:, 2:3] / np.float32(self.scale)
         out[sampled[:, 2] < 1e-3] = np.nan
         return out.astype(np.float32)
-
-
-def _remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Bilinear samples of a float image at points (m,), (m, channels); clamped to the edge."""
-    from pipeline.neighbours import _as_map  # one implementation of cv2.remap's map-size workaround
-
-    count = len(x)
-    sampled = cv2.remap(image, _as_map(x), _as_map(y), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return sampled.reshape(-1, image.shape[2])[:count]
 
 
 @dataclass
@@ -137,19 +128,23 @@ class NeighbourFill:
     full-frame views of them, made on first use (the debugger's), never by the pipeline itself."""
 
     offset: int
-    alignment_error: float  # eq. 23 over the whole common area
+    alignment_error: float  # eq. 23 over the common area (on a grid, see _priority)
     pieces: list[FlowPiece]
     shape: tuple[int, int]
     filled: np.ndarray  # bool: pixels this neighbour's local warp filled
     reached: np.ndarray | None = None  # bool: missing pixels its local warp had a sample for
 
     @cached_property
-    def flow(self) -> local_flow.LocalFlowResult:
-        return _full_frame(self.pieces, self.shape)[0]
+    def _full_frame_views(self) -> tuple[local_flow.LocalFlowResult, fmm.MotionInpaintResult]:
+        return _full_frame(self.pieces, self.shape)  # both views at once: they share the pasting
 
-    @cached_property
+    @property
+    def flow(self) -> local_flow.LocalFlowResult:
+        return self._full_frame_views[0]
+
+    @property
     def inpainted(self) -> fmm.MotionInpaintResult:
-        return _full_frame(self.pieces, self.shape)[1]
+        return self._full_frame_views[1]
 
     def inpainted_flow_at(self, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
         """(m, 2) float32 inpainted flow at full-frame pixels; NaN outside every box or where there is none."""
@@ -302,8 +297,8 @@ def _priority(target: np.ndarray, known: np.ndarray, neighbours: Sequence[Warped
     errors = [float("nan")] * len(neighbours)
     order: list[int] = []
     usable = 0
-    # A grid about 320 pixels wide (every other pixel at 640x360, as local_flow.alignment_error): the same
-    # mean within noise, a fraction of the work.
+    # A grid about 320 pixels wide (every other pixel at 640x360): the same mean within noise, a fraction of
+    # the work.
     step = max(2, max(target.shape[:2]) // 320)
     grid_y, grid_x = np.mgrid[0:target.shape[0]:step, 0:target.shape[1]:step].astype(np.float32)
     target_grid = mosaic.intensity(target[::step, ::step])
@@ -327,8 +322,8 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     """Steps 2-4 for the nearest ``max_warp_neighbours`` neighbours: local flow, motion inpainting, local warp.
 
     ``want``: which of the pixels to fill (ys, xs) need it. Flow and motion inpainting run inside boxes around
-    them only (``_work_boxes``; results are pasted into full-frame arrays); the local warp is sampled at the
-    pixels to fill and on the local error's band.
+    them only (``_work_boxes``), at the flow's working resolution; the local warp is sampled at the pixels to
+    fill and on the local error's band.
     """
     height, width = missing.shape
     scale = 1.0 if config.flow_max_side is None else min(1.0, config.flow_max_side / max(height, width))

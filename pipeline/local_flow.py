@@ -27,11 +27,11 @@ on the background and the object's own 11-35 px motion on its interior. ms: one 
     farneback                0.564   2.04    0.278    3.64     68
     lk on an 8 px grid       0.193   0.54    0.262    0.39     58
 
-DIS medium is the knee in flow accuracy: 2-6x more accurate than the faster presets; 2-2.5x faster than Farneback (which also
-loses the larger displacements) and than the thesis' sparse LK, which is a little better on the smooth photo
-flows but 2-3.5x worse on the video's background and object (an 8 px grid interpolated across motion edges).
-``dis_preset="fast", dis_finest_scale=0`` roughly halves the error again for ~3x the time (~1 s per 1080p pair
-against ~0.24 s), worth it only where seams must be sub-0.2 px.
+DIS medium is the knee in flow accuracy: 2-6x more accurate than the faster presets; 2-2.5x faster than
+Farneback (which also loses the larger displacements) and than the thesis' sparse LK, which is a little better
+on the smooth photo flows but 2-3.5x worse on the video's background and object (an 8 px grid interpolated
+across motion edges). ``dis_preset="fast", dis_finest_scale=0`` roughly halves the error again for ~3x the
+time (~1 s per 1080p pair against ~0.24 s), worth it only where seams must be sub-0.2 px.
 
 Yet what completion makes of the flow hardly depends on that accuracy: each pixel takes the candidate whose
 warp best explains its surroundings, out of four neighbours' (pipeline/completion.py), and the mosaic fills
@@ -41,7 +41,7 @@ small-shaky-5 -0.08 dB (mean -0.06, real clips -0.25), while DIS runs 3x faster 
 400x300 box), a sixth of full mode's time at 640x360. So "fast" is the default; "medium" stays a config
 value (``dis_preset``) for quality-first use.
 
-Filling the holes before DIS (medium ; same photo cases; EPE within 24 px of the target's holes / elsewhere):
+Filling the holes before DIS (medium; same photo cases; EPE within 24 px of the target's holes / elsewhere):
 the other image's pixels, then push-pull 0.29 / 0.24; push-pull of each image's own pixels 0.99 / 0.28;
 left black 8.7 / 0.42. The other image's texture keeps DIS's patches matching across the hole boundary,
 which is exactly where motion inpainting starts from.

@@ -24,14 +24,28 @@ _MAP_COLUMNS = 4096
 _TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within this of the edge weighs nothing
 
 
-def _as_map(values: np.ndarray) -> np.ndarray:
-    """Coordinates as a 2-D float32 map for cv2.remap, whose sides must stay below 32767 (padded with -2)."""
-    flat = np.asarray(values, np.float32).reshape(-1)
-    columns = min(max(len(flat), 1), _MAP_COLUMNS)
-    rows = -(-len(flat) // columns)
-    padded = np.full(rows * columns, -2.0, np.float32)
-    padded[:len(flat)] = flat
-    return padded.reshape(rows, columns)
+def remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray,
+                 border_mode: int = cv2.BORDER_CONSTANT) -> np.ndarray:
+    """Bilinear samples of ``image`` at points (x, y) (float arrays of one size m): (m, channels).
+
+    cv2.remap wants its points as a 2-D map whose sides stay below 32767: they are laid out in rows of at
+    most 4096 (the last row padded, its samples dropped)."""
+    x = np.asarray(x, np.float32).reshape(-1)
+    y = np.asarray(y, np.float32).reshape(-1)
+    count = len(x)
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    if count == 0:
+        return np.zeros((0, channels), image.dtype)
+    columns = min(count, _MAP_COLUMNS)
+    rows = -(-count // columns)
+
+    def as_map(values: np.ndarray) -> np.ndarray:
+        padded = np.full(rows * columns, -2.0, np.float32)
+        padded[:count] = values
+        return padded.reshape(rows, columns)
+
+    sampled = cv2.remap(image, as_map(x), as_map(y), cv2.INTER_LINEAR, borderMode=border_mode)
+    return sampled.reshape(-1, channels)[:count]
 
 
 class WarpedNeighbour:
@@ -92,26 +106,20 @@ class WarpedNeighbour:
         """Bilinear samples at stabilized points (float arrays of one shape): (colours (..., 3) uint8,
         valid (...) bool); invalid samples are black."""
         shape = np.shape(x)
-        x, y = _as_map(x), _as_map(y)
-        if x.size == 0:
-            return np.zeros(shape + (3,), np.uint8), np.zeros(shape, bool)
+        x = np.asarray(x, np.float32).reshape(-1)
+        y = np.asarray(y, np.float32).reshape(-1)
         if self._rgb is not None:
-            colours = cv2.remap(self._rgb, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            coverage = cv2.remap(self._valid.astype(np.uint8) * 255, x, y, cv2.INTER_LINEAR,
-                                 borderMode=cv2.BORDER_CONSTANT)
-            valid = coverage == 255
+            colours = remap_points(self._rgb, x, y)
+            valid = remap_points(self._valid.astype(np.uint8) * 255, x, y)[:, 0] == 255
         else:
             m = self.other_from_stab
             w = m[2, 0] * x + m[2, 1] * y + m[2, 2]
             src_x = ((m[0, 0] * x + m[0, 1] * y + m[0, 2]) / w).astype(np.float32)
             src_y = ((m[1, 0] * x + m[1, 1] * y + m[1, 2]) / w).astype(np.float32)
-            colours = cv2.remap(self.original, src_x, src_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            colours = remap_points(self.original, src_x, src_y)
             height, width = self.original.shape[:2]
             valid = ((src_x > -_TAP_SLACK) & (src_x < width - 1 + _TAP_SLACK)
                      & (src_y > -_TAP_SLACK) & (src_y < height - 1 + _TAP_SLACK))
-        count = int(np.prod(shape))
-        colours = colours.reshape(-1, 3)[:count]
-        valid = valid.reshape(-1)[:count]
         colours[~valid] = 0
         return colours.reshape(shape + (3,)), valid.reshape(shape)
 
