@@ -100,7 +100,7 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
             yield _MotionPair(frame, previous, prepared, source.drain_warnings())
             previous = prepared
 
-    def estimate(pair: _MotionPair) -> tuple[_MotionPair, motion.MotionEstimate]:
+    def estimate_pair(pair: _MotionPair) -> tuple[_MotionPair, motion.MotionEstimate]:
         if pair.previous is None:
             return pair, motion.first_frame_estimate()
         if pair.prepared.gray.shape != pair.previous.gray.shape:
@@ -109,7 +109,7 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
 
     try:
         with one_pass(source) as decoded:
-            for pair, estimate in parallel.ordered_map(estimate, pairs(decoded), workers):
+            for pair, estimate in parallel.ordered_map(estimate_pair, pairs(decoded), workers):
                 frame = pair.frame
                 stamp = Stamp(frame.index, frame.time_s)
                 for message in pair.decoder_warnings:  # decoder complaints (corrupt packets skipped)
@@ -296,8 +296,11 @@ class _FrameRenderer:
         # Decoding is deterministic, so pass 2 sees pass 1's frames; guard anyway.
         t = min(frame.index, len(self.orig_from_stab) - 1)
         emit("input", frame)
-        stabilized = warping.warp_frame(frame.rgb, self.orig_from_stab[t])
-        emit("warp", stabilized)
+        # Crop mode writes its own warp (by orig_from_out): the stabilized frame is made there only to be shown.
+        stabilized = None
+        if config.mode != "crop" or self.keep_events:
+            stabilized = warping.warp_frame(frame.rgb, self.orig_from_stab[t])
+            emit("warp", stabilized)
         # Neighbours from the same shot only: nothing is carried across a scene cut.
         same_shot = {n.index: n.rgb for n in window.neighbours.values()
                      if n.index < len(self.segment_of) and self.segment_of[n.index] == self.segment_of[t]}
@@ -313,11 +316,11 @@ class _FrameRenderer:
         else:
             output, output_valid = stabilized.frame, ~stabilized.missing
         if config.deblur.enabled and config.deblur.radius > 0:
-            # Last, on the frame as it will be written: in full mode the neighbours completion warped into
-            # this view are reused (no extra warps), transferred pixels are resampled once, and completed
-            # pixels are sharpened like the rest (measured +0.06 dB over the frame, +5.7 dB on the completed
-            # pixels, against deblurring before completion), so the frame stays full; missing pixels of
-            # --mode none stay missing. Sharpness is compared on the original frames (pipeline/deblur.py).
+            # Last, on the frame as it will be written: in full mode completion's neighbours are reused (the
+            # sharper ones are warped whole once, on deblurring's first look), transferred pixels are resampled
+            # once, and completed pixels are sharpened like the rest (measured +0.06 dB over the frame, +5.7 dB
+            # on the completed pixels, against deblurring before completion), so the frame stays full; missing
+            # pixels of --mode none stay missing. Sharpness is compared on the original frames (pipeline/deblur.py).
             deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: frame.rgb},
                                             self.curr_from_prev, self.orig_from_out[t], config.deblur,
                                             warped=warped, cache=self.energy_cache)
