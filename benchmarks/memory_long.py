@@ -16,10 +16,9 @@ import argparse
 import json
 import sys
 import time
-from fractions import Fraction
 from pathlib import Path
+from typing import Iterator
 
-import av
 import numpy as np
 
 from ffviz.bench import ffviz_command, run_measured
@@ -37,18 +36,16 @@ def write_long_clip(path: Path, width: int, height: int, fps: int, seconds: floa
         jitter_px=6.0 * height / 360)  # the demo's shake, scaled to the frame size
     temp = path.with_name(f".{path.name}.tmp.mp4")
     started = time.perf_counter()
-    with av.open(str(temp), "w") as container:
-        stream = container.add_stream("libx264", rate=Fraction(fps), options={"crf": "20", "preset": "veryfast"})
-        stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
-        step = max(1, config.n_frames // 10)
+    step = max(1, config.n_frames // 10)
+
+    def with_progress() -> Iterator[np.ndarray]:
         for i, rgb in enumerate(synthetic.stream_frames(config)):
-            for packet in stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")):
-                container.mux(packet)
+            yield rgb
             if (i + 1) % step == 0:
                 print(f"  {path.name}: {i + 1}/{config.n_frames} frames, {time.perf_counter() - started:.0f} s",
                       flush=True)
-        for packet in stream.encode(None):
-            container.mux(packet)
+
+    synthetic.write_video(with_progress(), temp, fps=fps, crf=20, preset="veryfast")
     temp.replace(path)
 
 

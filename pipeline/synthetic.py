@@ -28,11 +28,12 @@ This module never imports rerun or matplotlib.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Iterable, Iterator
 
 import cv2
 import numpy as np
@@ -444,20 +445,10 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
     t = np.arange(n, dtype=np.float64)
     sec = t / fps
 
-    # Intended path: steady pan + slow drift and roll (all well below the jitter band).
-    ph = rng.uniform(0.0, 2.0 * math.pi, size=3)
-    f0 = cfg.drift_hz
-    icx = cfg.pan_px_per_frame * t + cfg.drift_px * np.sin(2 * math.pi * f0 * sec + ph[0])
-    icy = 0.6 * cfg.drift_px * np.sin(2 * math.pi * 0.8 * f0 * sec + ph[1])
-    ith = math.radians(cfg.drift_deg) * np.sin(2 * math.pi * 0.6 * f0 * sec + ph[2])
+    # Intended path: steady pan + slow drift and roll; hand-held jitter on top.
+    (drift_x, icy, ith), (jx, jy, jth, jzm) = _drift_and_jitter(cfg, rng, n, fps)
+    icx = cfg.pan_px_per_frame * t + drift_x
     izm = np.ones(n)
-
-    # Hand-held jitter: independent band-limited processes, normalised to the configured std.
-    band = cfg.jitter_band_hz
-    jx = cfg.jitter_px * _band_limited_noise(rng, n, fps, band)
-    jy = cfg.jitter_px * _band_limited_noise(rng, n, fps, band)
-    jth = math.radians(cfg.jitter_deg) * _band_limited_noise(rng, n, fps, band)
-    jzm = cfg.jitter_scale * _band_limited_noise(rng, n, fps, band)
 
     # Object path parameters (drawn now so the random stream does not depend on later choices).
     direction = 1.0 if rng.random() < 0.5 else -1.0
@@ -471,21 +462,8 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
     f_int = fw(icx, icy, ith, izm)
     f_act = fw(icx + jx, icy + jy, ith + jth, izm * (1.0 + jzm))
 
-    # World canvas: cover every actual and intended view grown by the margin, plus interpolation padding.
-    mx, my = cfg.world_margin * w, cfg.world_margin * h
-    grown = _corners(w, h, mx, my)
-    pts = np.concatenate(
-        [_apply(np.linalg.inv(f_act), grown).reshape(-1, 2), _apply(np.linalg.inv(f_int), grown).reshape(-1, 2)]
-    )
-    xmin, ymin = pts.min(axis=0) - _INTERP_PAD
-    xmax, ymax = pts.max(axis=0) + _INTERP_PAD
-    photo = load_image(cfg.image)
-    pw, phh = photo.shape[1], photo.shape[0]
-    scale = max((xmax - xmin + 1) / pw, (ymax - ymin + 1) / phh, float(cfg.min_world_scale))
-    ww, wh = int(math.ceil(scale * pw)), int(math.ceil(scale * phh))
-    world = cv2.resize(photo, (ww, wh), interpolation=cv2.INTER_CUBIC if scale >= 1 else cv2.INTER_AREA)
-    shift_x = (ww - 1) / 2.0 - (xmin + xmax) / 2.0
-    shift_y = (wh - 1) / 2.0 - (ymin + ymax) / 2.0
+    # World canvas: cover every actual and intended view.
+    world, shift_x, shift_y = _world_canvas(cfg, f_act, f_int)
     icx = icx + shift_x
     icy = icy + shift_y
     f_int = fw(icx, icy, ith, izm)
@@ -550,6 +528,40 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
     )
 
 
+def _drift_and_jitter(cfg: SyntheticConfig, rng: np.random.Generator, n: int, fps: float,
+                      ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, ...]]:
+    """The camera's random motion, drawn from ``rng`` in this order: the slow intentional drift and roll
+    (well below the jitter band; no steady pan), then the hand-held jitter as independent band-limited
+    processes normalised to the configured std. ((x, y, roll), (x, y, roll, relative zoom)) per frame."""
+    sec = np.arange(n, dtype=np.float64) / fps
+    ph = rng.uniform(0.0, 2.0 * math.pi, size=3)
+    f0 = cfg.drift_hz
+    drift = (cfg.drift_px * np.sin(2 * math.pi * f0 * sec + ph[0]),
+             0.6 * cfg.drift_px * np.sin(2 * math.pi * 0.8 * f0 * sec + ph[1]),
+             math.radians(cfg.drift_deg) * np.sin(2 * math.pi * 0.6 * f0 * sec + ph[2]))
+    band = cfg.jitter_band_hz
+    jitter = (cfg.jitter_px * _band_limited_noise(rng, n, fps, band),
+              cfg.jitter_px * _band_limited_noise(rng, n, fps, band),
+              math.radians(cfg.jitter_deg) * _band_limited_noise(rng, n, fps, band),
+              cfg.jitter_scale * _band_limited_noise(rng, n, fps, band))
+    return drift, jitter
+
+
+def _world_canvas(cfg: SyntheticConfig, *views: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """The world photograph scaled to cover every view (frame_from_world stacks) grown by the world margin,
+    plus interpolation padding; and the (x, y) shift that centres the views on it."""
+    w, h = int(cfg.width), int(cfg.height)
+    grown = _corners(w, h, cfg.world_margin * w, cfg.world_margin * h)
+    pts = np.concatenate([_apply(np.linalg.inv(view), grown).reshape(-1, 2) for view in views])
+    xmin, ymin = pts.min(axis=0) - _INTERP_PAD
+    xmax, ymax = pts.max(axis=0) + _INTERP_PAD
+    photo = load_image(cfg.image)
+    scale = max((xmax - xmin + 1) / photo.shape[1], (ymax - ymin + 1) / photo.shape[0], float(cfg.min_world_scale))
+    ww, wh = int(math.ceil(scale * photo.shape[1])), int(math.ceil(scale * photo.shape[0]))
+    world = cv2.resize(photo, (ww, wh), interpolation=cv2.INTER_CUBIC if scale >= 1 else cv2.INTER_AREA)
+    return world, (ww - 1) / 2.0 - (xmin + xmax) / 2.0, (wh - 1) / 2.0 - (ymin + ymax) / 2.0
+
+
 def stream_frames(config: SyntheticConfig) -> Iterator[np.ndarray]:
     """The frames of a clip rendered one at a time, for clips too long to hold (minutes of 1080p).
 
@@ -567,31 +579,13 @@ def stream_frames(config: SyntheticConfig) -> Iterator[np.ndarray]:
         raise ValueError(f"bad synthetic config: {w}x{h}, {n} frames at {fps} fps")
     rng = np.random.default_rng(cfg.seed)
     fc = ((w - 1) / 2.0, (h - 1) / 2.0)
-    sec = np.arange(n, dtype=np.float64) / fps
-    ph = rng.uniform(0.0, 2.0 * math.pi, size=3)
-    f0 = cfg.drift_hz
-    cx = cfg.drift_px * np.sin(2 * math.pi * f0 * sec + ph[0])
-    cy = 0.6 * cfg.drift_px * np.sin(2 * math.pi * 0.8 * f0 * sec + ph[1])
-    theta = math.radians(cfg.drift_deg) * np.sin(2 * math.pi * 0.6 * f0 * sec + ph[2])
-    band = cfg.jitter_band_hz
-    cx = cx + cfg.jitter_px * _band_limited_noise(rng, n, fps, band)
-    cy = cy + cfg.jitter_px * _band_limited_noise(rng, n, fps, band)
-    theta = theta + math.radians(cfg.jitter_deg) * _band_limited_noise(rng, n, fps, band)
-    zoom = 1.0 + cfg.jitter_scale * _band_limited_noise(rng, n, fps, band)
+    (drift_x, drift_y, roll), (jx, jy, jth, jzm) = _drift_and_jitter(cfg, rng, n, fps)
+    cx, cy, theta, zoom = drift_x + jx, drift_y + jy, roll + jth, 1.0 + jzm
     frame_from_world = np.stack([_frame_from_world(cx[i], cy[i], theta[i], zoom[i], fc) for i in range(n)])
 
-    # World canvas: every view grown by the margin, plus interpolation padding (as generate does).
-    grown = _corners(w, h, cfg.world_margin * w, cfg.world_margin * h)
-    pts = _apply(np.linalg.inv(frame_from_world), grown).reshape(-1, 2)
-    xmin, ymin = pts.min(axis=0) - _INTERP_PAD
-    xmax, ymax = pts.max(axis=0) + _INTERP_PAD
-    photo = load_image(cfg.image)
-    scale = max((xmax - xmin + 1) / photo.shape[1], (ymax - ymin + 1) / photo.shape[0], float(cfg.min_world_scale))
-    ww, wh = int(math.ceil(scale * photo.shape[1])), int(math.ceil(scale * photo.shape[0]))
-    world = cv2.resize(photo, (ww, wh), interpolation=cv2.INTER_CUBIC if scale >= 1 else cv2.INTER_AREA)
+    world, shift_x, shift_y = _world_canvas(cfg, frame_from_world)
     # Centre the views on the canvas: moving the camera centres by +shift is frame_from_world @ T(-shift).
-    shift = _translation((ww - 1) / 2.0 - (xmin + xmax) / 2.0, (wh - 1) / 2.0 - (ymin + ymax) / 2.0)
-    frame_from_world = frame_from_world @ np.linalg.inv(shift)
+    frame_from_world = frame_from_world @ np.linalg.inv(_translation(shift_x, shift_y))
     _check_coverage(world.shape, frame_from_world, w, h, "streamed")
     # Bilinear, not generate's cubic: a third of the cost at 1080p, and the canvas is sampled near 1:1.
     for m in frame_from_world:
@@ -602,26 +596,30 @@ def stream_frames(config: SyntheticConfig) -> Iterator[np.ndarray]:
 
 
 def write_video(
-    video: SyntheticVideo | Sequence[np.ndarray],
+    video: SyntheticVideo | Iterable[np.ndarray],
     path,
     *,
     fps: float | None = None,
     crf: int = 12,
+    preset: str | None = None,
     sharp: bool = False,
 ) -> None:
-    """Write frames (``video.frames``, or ``video.sharp_frames`` with ``sharp=True``, or a list of RGB uint8
-    frames) to a video file with PyAV: libx264, yuv420p, ``crf`` (0 = lossless in YUV), the config fps."""
+    """Write frames (``video.frames``, or ``video.sharp_frames`` with ``sharp=True``, or RGB uint8 frames from
+    any iterable, encoded as they come: e.g. ``stream_frames``) to a video file with PyAV: libx264, yuv420p,
+    ``crf`` (0 = lossless in YUV), x264's ``preset`` (None: its default), the config fps."""
     import av
 
     if isinstance(video, SyntheticVideo):
-        frames = video.sharp_frames if sharp else video.frames
+        frames: Iterable[np.ndarray] = video.sharp_frames if sharp else video.frames
         rate = video.config.fps if fps is None else fps
     else:
-        frames = list(video)
+        frames = video
         rate = 30.0 if fps is None else fps
-    if not frames:
+    remaining = iter(frames)
+    first = next(remaining, None)
+    if first is None:
         raise ValueError("no frames to write")
-    h, w = frames[0].shape[:2]
+    h, w = first.shape[:2]
     if w % 2 or h % 2:
         raise ValueError(f"yuv420p needs even frame sizes, got {w}x{h}")
     container = av.open(str(Path(path)), mode="w")
@@ -629,8 +627,9 @@ def write_video(
         stream = container.add_stream("libx264", rate=Fraction(rate).limit_denominator(1001))
         stream.width, stream.height = w, h
         stream.pix_fmt = "yuv420p"
-        stream.options = {"qp": "0"} if crf <= 0 else {"crf": str(int(crf))}
-        for f in frames:
+        options = {"qp": "0"} if crf <= 0 else {"crf": str(int(crf))}
+        stream.options = options if preset is None else {**options, "preset": preset}
+        for f in itertools.chain([first], remaining):
             arr = np.ascontiguousarray(f, dtype=np.uint8)
             for packet in stream.encode(av.VideoFrame.from_ndarray(arr, format="rgb24")):
                 container.mux(packet)
