@@ -53,9 +53,7 @@ def markdown_line(row: BenchRow) -> str:
 
 
 def _flat(row: BenchRow) -> dict:
-    values = {name: get(row) for name, get, _ in COLUMNS}
-    values["size"] = f"{row.width}x{row.height}"
-    return values
+    return {name: get(row) for name, get, _ in COLUMNS}
 
 
 def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
