@@ -569,7 +569,8 @@ def stream_frames(config: SyntheticConfig) -> Iterator[np.ndarray]:
     (translation, roll, zoom) filming the world photograph. Memory holds the world canvas and the (N, 3, 3)
     path, never more than the frame being yielded. What needs more is not offered, and the config must turn
     it off: a steady pan (the world canvas would grow with the clip's length), the moving object and the
-    blurred frames. The same config does not give ``generate``'s frames (its random draws differ).
+    blurred frames. The same config does not give ``generate``'s frames: the camera draws are the same, but
+    ``generate``'s canvas also covers the intended views, and it renders bicubic.
     """
     cfg = config
     if cfg.pan_px_per_frame != 0 or cfg.moving_object or cfg.blurred_frames != ():
