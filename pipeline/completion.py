@@ -46,9 +46,10 @@ from typing import Sequence
 
 import cv2
 import numpy as np
+from numba import njit
 
 from pipeline import fallback, fmm, local_flow, mosaic
-from pipeline.neighbours import WarpedNeighbour, remap_points
+from pipeline.neighbours import WarpedNeighbour
 
 # What filled each pixel (CompletionResult.source).
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK = 0, 1, 2, 3
@@ -110,14 +111,10 @@ class FlowPiece:
         # Pixel centres: full-resolution (x + 0.5) is working (x + 0.5) * scale.
         u = (xs - cols.start + 0.5) * self.scale - 0.5
         v = (ys - rows.start + 0.5) * self.scale - 0.5
-        flow = self.inpainted.flow
-        defined = np.isfinite(flow[..., 0]).astype(np.float32)
-        weighted = np.dstack([np.nan_to_num(flow) * defined[..., None], defined])
-        sampled = remap_points(weighted, u, v, cv2.BORDER_REPLICATE)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out = sampled[:, :2] / sampled[:, 2:3] / np.float32(self.scale)
-        out[sampled[:, 2] < 1e-3] = np.nan
-        return out.astype(np.float32)
+        out = fmm.sample_flow(self.inpainted.flow, u, v)
+        if self.scale != 1.0:
+            out /= np.float32(self.scale)
+        return out
 
 
 @dataclass
@@ -215,13 +212,25 @@ class _LocalError:
     def __call__(self, colours: np.ndarray, landed: np.ndarray) -> np.ndarray:
         """(m,) errors from a warped neighbour's (colours, landed) on the band; NaN where the warp reached none of
         a pixel's window."""
-        difference = np.abs(self.target - mosaic.intensity(colours)) * landed
-        valid = self.window >= 0
-        index = np.maximum(self.window, 0)
-        total = np.where(valid, difference[index], 0).sum(axis=1)
-        count = np.where(valid, landed[index], False).sum(axis=1)
-        per_point = np.where(count > 0, total / np.maximum(count, 1), np.nan).astype(np.float32)
+        difference = np.abs(self.target - mosaic.intensity(colours))
+        per_point = np.empty(len(self.window), np.float32)
+        _window_means(difference, np.ascontiguousarray(landed, dtype=np.bool_), self.window, per_point)
         return per_point[self.point_of]
+
+
+@njit(cache=True, nogil=True)
+def _window_means(difference: np.ndarray, landed: np.ndarray, window: np.ndarray, out: np.ndarray) -> None:
+    """Per row of ``window`` (indices into the band, -1: none), the mean ``difference`` over its landed entries;
+    NaN where none landed."""
+    for i in range(window.shape[0]):
+        total = 0.0
+        count = 0
+        for k in range(window.shape[1]):
+            j = window[i, k]
+            if j >= 0 and landed[j]:
+                total += difference[j]
+                count += 1
+        out[i] = total / count if count > 0 else np.nan
 
 
 def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
@@ -332,6 +341,7 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     wanted = np.zeros((height, width), bool)
     wanted[ys[want], xs[want]] = True
     works = _work_boxes(wanted, None if config.flow_margin_px is None else round(config.flow_margin_px / scale))
+    views = [_BoxView.of(work, target, known, rescue_focus, near_missing, scale) for work in works]
     points_y = np.concatenate([ys, local_error.band_y])
     points_x = np.concatenate([xs, local_error.band_x])
     m = len(ys)
@@ -343,11 +353,7 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
         neighbour = neighbours[i]
         if not np.isfinite(errors[i]):
             continue  # no overlap to measure flow on
-        pieces = []
-        for work in works:
-            neighbour_rgb, neighbour_valid = neighbour.crop(work)
-            pieces.append(_flow_in_box(work, target[work], known[work], neighbour_rgb, neighbour_valid,
-                                       rescue_focus[work], near_missing[work], scale, config))
+        pieces = [_flow_in_box(view, *neighbour.crop(view.box), config) for view in views]
         fill = NeighbourFill(neighbour.offset, errors[i], pieces, (height, width), np.zeros((height, width), bool))
         colours, landed, motion = _local_warp(fill.inpainted_flow_at(points_y, points_x), neighbour, points_y,
                                               points_x)
@@ -362,36 +368,61 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     return fills, candidates
 
 
-def _flow_in_box(box: tuple[slice, slice], target: np.ndarray, known: np.ndarray, neighbour_rgb: np.ndarray,
-                 neighbour_valid: np.ndarray, focus: np.ndarray, near_missing: np.ndarray, scale: float,
+@dataclass(frozen=True)
+class _BoxView:
+    """Frame t's side of one work box at the flow's working resolution: made once, used for every neighbour."""
+
+    box: tuple[slice, slice]  # full-resolution frame coordinates
+    size: tuple[int, int] | None  # (width, height) at the working resolution; None: full resolution
+    scale: float  # working / full resolution (exact along x)
+    target: np.ndarray
+    known: np.ndarray
+    focus: np.ndarray  # where large motions are searched for (local_flow's rescue)
+    near_missing: np.ndarray  # where motion inpainting may fill
+
+    @staticmethod
+    def of(box: tuple[slice, slice], target: np.ndarray, known: np.ndarray, focus: np.ndarray,
+           near_missing: np.ndarray, scale: float) -> _BoxView:
+        height, width = box[0].stop - box[0].start, box[1].stop - box[1].start
+        size = (max(round(width * scale), 8), max(round(height * scale), 8))
+        if not (size[0] < width and size[1] < height):
+            return _BoxView(box, None, 1.0, target[box], known[box], focus[box], near_missing[box])
+        return _BoxView(box, size, size[0] / width, _shrink(target[box], size), _shrink_all(known[box], size),
+                        _shrink_any(focus[box], size), _shrink_any(near_missing[box], size))
+
+    def shrink(self, image: np.ndarray) -> np.ndarray:
+        return image if self.size is None else _shrink(image, self.size)
+
+    def shrink_all(self, mask: np.ndarray) -> np.ndarray:
+        return mask if self.size is None else _shrink_all(mask, self.size)
+
+
+def _shrink(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+
+
+def _shrink_all(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A coarse pixel is in only if all its fine pixels are."""
+    return _shrink(mask.astype(np.uint8) * 255, size) == 255
+
+
+def _shrink_any(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    return _shrink(mask.astype(np.uint8) * 255, size) > 0
+
+
+def _flow_in_box(view: _BoxView, neighbour_rgb: np.ndarray, neighbour_valid: np.ndarray,
                  config: CompletionConfig) -> FlowPiece:
-    """Local flow and its motion inpainting in one box (the arrays are the box's crops), at ``scale`` of the
-    resolution."""
-    height, width = known.shape
-    size = (max(round(width * scale), 8), max(round(height * scale), 8))
-    if size[0] < width and size[1] < height:
-        def shrink(image: np.ndarray) -> np.ndarray:
-            return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-
-        def shrink_all(mask: np.ndarray) -> np.ndarray:  # a coarse pixel is in only if all its fine pixels are
-            return shrink(mask.astype(np.uint8) * 255) == 255
-
-        def shrink_any(mask: np.ndarray) -> np.ndarray:
-            return shrink(mask.astype(np.uint8) * 255) > 0
-
-        target, neighbour_rgb, known, neighbour_valid = (shrink(target), shrink(neighbour_rgb), shrink_all(known),
-                                                         shrink_all(neighbour_valid))
-        focus, near_missing = shrink_any(focus), shrink_any(near_missing)
-        scale = size[0] / width  # the exact factor along x (y differs by rounding only)
-    else:
-        scale = 1.0
-    flow = local_flow.local_flow(target, known, neighbour_rgb, neighbour_valid, config.flow, focus=focus)
+    """Local flow and its motion inpainting in one box, from the neighbour's crop of it, at the box view's
+    working resolution."""
+    neighbour_rgb, neighbour_valid = view.shrink(neighbour_rgb), view.shrink_all(neighbour_valid)
+    flow = local_flow.local_flow(view.target, view.known, neighbour_rgb, neighbour_valid, config.flow,
+                                 focus=view.focus)
     trusted = flow.common if flow.reliable is None else flow.reliable
     # Propagate over everything untrusted near the hole: the common area is eroded, so the band between
     # it and the missing area must be crossed too.
     inpainted = fmm.inpaint_motion(flow.flow, trusted, neighbour_rgb, neighbour_valid=neighbour_valid,
-                                   region=~trusted & near_missing, config=config.inpaint)
-    return FlowPiece(box, scale, flow, inpainted)
+                                   region=~trusted & view.near_missing, config=config.inpaint)
+    return FlowPiece(view.box, view.scale, flow, inpainted)
 
 
 def _work_boxes(wanted: np.ndarray, margin: int | None) -> list[tuple[slice, slice]]:

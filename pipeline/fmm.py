@@ -335,6 +335,37 @@ def _initial_state(known: np.ndarray, region: np.ndarray) -> tuple[np.ndarray, n
     return state, arrival
 
 
+@njit(cache=True, nogil=True)
+def _sample_defined(flow: np.ndarray, u: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+    """Bilinear flow at points (u, v) from the defined (finite) vectors only, edge pixels replicated; NaN where
+    the defined taps weigh less than 1e-3."""
+    h, w = flow.shape[0], flow.shape[1]
+    for i in range(u.shape[0]):
+        x0 = int(np.floor(u[i]))
+        y0 = int(np.floor(v[i]))
+        fx = u[i] - x0
+        fy = v[i] - y0
+        sum_w = 0.0
+        sum_x = 0.0
+        sum_y = 0.0
+        for dy in range(2):
+            yy = min(max(y0 + dy, 0), h - 1)
+            wy = fy if dy else 1.0 - fy
+            for dx in range(2):
+                xx = min(max(x0 + dx, 0), w - 1)
+                weight = wy * (fx if dx else 1.0 - fx)
+                if weight > 0.0 and flow[yy, xx, 0] == flow[yy, xx, 0]:  # NaN: not defined
+                    sum_w += weight
+                    sum_x += weight * flow[yy, xx, 0]
+                    sum_y += weight * flow[yy, xx, 1]
+        if sum_w < 1e-3:
+            out[i, 0] = np.nan
+            out[i, 1] = np.nan
+        else:
+            out[i, 0] = sum_x / sum_w
+            out[i, 1] = sum_y / sum_w
+
+
 # ----------------------------------------------------------------------------------------------------
 # Python API
 
@@ -444,3 +475,13 @@ def inpaint_motion(flow: np.ndarray, known: np.ndarray, neighbour_rgb: np.ndarra
     filled[box] = crop_order >= 0
     out_flow[box] = crop_flow  # NaN stays NaN where nothing was filled
     return MotionInpaintResult(flow=out_flow, order=order, arrival=arrival, filled=filled)
+
+
+def sample_flow(flow: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(m, 2) float32 bilinear samples of an inpainted flow (NaN where undefined) at points (x, y): each point
+    interpolates between the defined vectors of its 2x2 footprint only (so an undefined neighbour does not
+    poison it), edges replicated; NaN where the defined taps weigh almost nothing."""
+    out = np.empty((len(x), 2), np.float32)
+    _sample_defined(np.ascontiguousarray(flow, dtype=np.float32), np.ascontiguousarray(x, dtype=np.float64),
+                    np.ascontiguousarray(y, dtype=np.float64), out)
+    return out

@@ -8,7 +8,7 @@ import pytest
 from scipy import ndimage
 
 from pipeline.errors import ConfigError
-from pipeline.fmm import MotionInpaintConfig, fast_marching, inpaint_motion
+from pipeline.fmm import MotionInpaintConfig, fast_marching, inpaint_motion, sample_flow
 
 H, W = 200, 300
 ROWS, COLS = np.mgrid[:H, :W]
@@ -290,3 +290,31 @@ def test_bad_inputs_are_refused():
         MotionInpaintConfig(radius=0)
     with pytest.raises(ConfigError):
         MotionInpaintConfig(colour_epsilon=0.0)
+
+
+def test_sample_flow_interpolates_between_defined_vectors_only():
+    rng = np.random.default_rng(3)
+    flow = rng.normal(size=(20, 30, 2)).astype(np.float32) * 5
+    flow[5:9, 10:14] = np.nan  # undefined patch
+    flow[:, 25:] = np.nan  # undefined columns up to the right edge
+    x = rng.uniform(-2, 31, 500)
+    y = rng.uniform(-2, 21, 500)
+    sampled = sample_flow(flow, x, y)
+    for (px, py), got in zip(zip(x, y), sampled):
+        x0, y0 = int(np.floor(px)), int(np.floor(py))
+        fx, fy = px - x0, py - y0
+        total, weight = np.zeros(2), 0.0
+        for dy, wy in ((0, 1 - fy), (1, fy)):
+            for dx, wx in ((0, 1 - fx), (1, fx)):
+                value = flow[min(max(y0 + dy, 0), 19), min(max(x0 + dx, 0), 29)]  # edges replicated
+                if np.isfinite(value[0]) and wy * wx > 0:
+                    total += wy * wx * value
+                    weight += wy * wx
+        if weight < 1e-3:
+            assert np.isnan(got).all()
+        else:
+            np.testing.assert_allclose(got, total / weight, rtol=1e-5, atol=1e-4)
+    # At pixel centres a defined vector comes back as it is, an undefined one as NaN.
+    np.testing.assert_array_equal(sample_flow(flow, np.array([3.0]), np.array([2.0]))[0], flow[2, 3])
+    assert np.isnan(sample_flow(flow, np.array([11.0]), np.array([6.0]))).all()
+    assert np.isnan(sample_flow(flow, np.array([27.5]), np.array([4.5]))).all()

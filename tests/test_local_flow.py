@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pipeline import completion, synthetic
-from pipeline.local_flow import LocalFlowConfig, local_flow, mean_abs_difference
+from pipeline.local_flow import LocalFlowConfig, fill_invalid, local_flow, mean_abs_difference
 from pipeline.mosaic import intensity
 from pipeline.neighbours import WarpedNeighbour
 from pipeline.warping import warp, warp_frame
@@ -180,3 +180,20 @@ def test_config_rejects_unknown_method():
         LocalFlowConfig(method="horn-schunck")
     with pytest.raises(ValueError):
         LocalFlowConfig(dis_preset="slow")
+
+
+def test_fill_invalid_keeps_valid_pixels_and_fills_smoothly_per_channel(photo):
+    grey = np.clip(np.round(intensity(photo)), 0, 255).astype(np.uint8)
+    valid = np.ones(grey.shape, bool)
+    valid[100:160, 200:300] = False  # a hole inside
+    valid[:, :40] = False  # and a band at the edge
+    filled = fill_invalid(grey, valid)
+    np.testing.assert_array_equal(filled[valid], grey[valid])
+    # Push-pull averages valid pixels: the fill stays within their range, and a constant comes back exactly.
+    assert grey[valid].min() <= filled[~valid].min() and filled[~valid].max() <= grey[valid].max()
+    np.testing.assert_array_equal(fill_invalid(np.where(valid, 77, 0).astype(np.uint8), valid), 77)
+    # Several channels at once equal one channel at a time, exactly (local_flow fills both images in one go).
+    stacked = np.dstack([grey, 255 - grey])
+    both = fill_invalid(stacked, valid)
+    np.testing.assert_array_equal(both[..., 0], filled)
+    np.testing.assert_array_equal(both[..., 1], fill_invalid(np.ascontiguousarray(255 - grey), valid))
