@@ -53,6 +53,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
 from scipy.ndimage import distance_transform_edt
 
 from pipeline.mosaic import intensity
@@ -135,9 +136,8 @@ def local_flow(target: np.ndarray, target_valid: np.ndarray, neighbour: np.ndarr
     # matching near the boundary honest); holes in both are filled smoothly. See the module docstring.
     first, second = _grey(target), _grey(neighbour)
     either = target_valid | neighbour_valid
-    both = fill_invalid(np.dstack([np.where(target_valid, first, second), np.where(neighbour_valid, second, first)]),
-                        either)  # one push-pull pyramid for both: they share the mask
-    first, second = both[..., 0], both[..., 1]
+    first, second = (fill_invalid(np.where(target_valid, first, second), either),
+                     fill_invalid(np.where(neighbour_valid, second, first), either))
     flow = _flow(first, second, common, config)
     if focus is not None and config.rescue_error is not None:
         _rescue_large_motions(flow, target, neighbour, neighbour_valid, common & focus, config)
@@ -229,16 +229,11 @@ def _rescue_large_motions(flow: np.ndarray, target: np.ndarray, neighbour: np.nd
 
 
 def fill_invalid(grey: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """``grey`` (uint8, (H, W) or (H, W, channels)) with its invalid pixels replaced by a smooth push-pull
-    interpolation of the valid ones, each channel on its own."""
+    """``grey`` (uint8) with its invalid pixels replaced by a smooth push-pull interpolation of the valid ones."""
     if valid.all() or not valid.any():
         return grey.copy()
-
-    def per_channel(weight: np.ndarray) -> np.ndarray:
-        return weight[..., None] if grey.ndim == 3 else weight
-
     weight = valid.astype(np.float32)
-    values = grey.astype(np.float32) * per_channel(weight)
+    values = grey.astype(np.float32) * weight
     levels: list[tuple[np.ndarray, np.ndarray]] = []
     # Push: average the valid pixels down the pyramid until every pixel has some weight.
     while True:
@@ -246,16 +241,23 @@ def fill_invalid(grey: np.ndarray, valid: np.ndarray) -> np.ndarray:
         if weight.min() > 0 or min(weight.shape) <= 2:
             break
         values, weight = cv2.pyrDown(values), cv2.pyrDown(weight)
-        values = values.reshape(weight.shape + grey.shape[2:])  # cv2 drops a last axis of 1
-    filled = values / per_channel(np.maximum(weight, 1e-6))
+    filled = values / np.maximum(weight, np.float32(1e-6))
     # Pull: fill each finer level's weak pixels from the coarser estimate, blending by the level's weight.
     for values, weight in reversed(levels[:-1]):
-        coarse = cv2.pyrUp(filled, dstsize=(weight.shape[1], weight.shape[0])).reshape(values.shape)
-        blend = per_channel(weight)  # weights lie in 0..1
-        filled = blend * (values / per_channel(np.maximum(weight, 1e-6))) + (1.0 - blend) * coarse
-    out = grey.copy()
-    out[~valid] = np.clip(np.round(filled[~valid]), 0, 255).astype(np.uint8)
-    return out
+        coarse = cv2.pyrUp(filled, dstsize=(weight.shape[1], weight.shape[0]))
+        _blend_in_place(coarse, values, weight)
+        filled = coarse
+    # (numpy, not a numba loop: numba 0.68.1 miscompiles that masked uint8 store and writes valid pixels too)
+    return np.where(valid, grey, np.clip(np.round(filled), 0, 255).astype(np.uint8))
+
+
+@njit(cache=True, nogil=True)
+def _blend_in_place(coarse: np.ndarray, values: np.ndarray, weight: np.ndarray) -> None:
+    """coarse = w * (values / w) + (1 - w) * coarse, weights in 0..1 (the pull step; one pass, no temporaries)."""
+    for y in range(coarse.shape[0]):
+        for x in range(coarse.shape[1]):
+            w = weight[y, x]
+            coarse[y, x] = w * (values[y, x] / max(w, np.float32(1e-6))) + (np.float32(1.0) - w) * coarse[y, x]
 
 
 # ---------------------------------------------------------------------- methods

@@ -182,7 +182,7 @@ def test_config_rejects_unknown_method():
         LocalFlowConfig(dis_preset="slow")
 
 
-def test_fill_invalid_keeps_valid_pixels_and_fills_smoothly_per_channel(photo):
+def test_fill_invalid_keeps_valid_pixels_and_fills_smoothly(photo):
     grey = np.clip(np.round(intensity(photo)), 0, 255).astype(np.uint8)
     valid = np.ones(grey.shape, bool)
     valid[100:160, 200:300] = False  # a hole inside
@@ -192,8 +192,3 @@ def test_fill_invalid_keeps_valid_pixels_and_fills_smoothly_per_channel(photo):
     # Push-pull averages valid pixels: the fill stays within their range, and a constant comes back exactly.
     assert grey[valid].min() <= filled[~valid].min() and filled[~valid].max() <= grey[valid].max()
     np.testing.assert_array_equal(fill_invalid(np.where(valid, 77, 0).astype(np.uint8), valid), 77)
-    # Several channels at once equal one channel at a time, exactly (local_flow fills both images in one go).
-    stacked = np.dstack([grey, 255 - grey])
-    both = fill_invalid(stacked, valid)
-    np.testing.assert_array_equal(both[..., 0], filled)
-    np.testing.assert_array_equal(both[..., 1], fill_invalid(np.ascontiguousarray(255 - grey), valid))
