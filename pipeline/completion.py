@@ -195,7 +195,7 @@ class _LocalError:
         pixel_of_label = np.zeros(int(labels.max()) + 1, np.int64)
         pixel_of_label[labels.reshape(-1)[known_flat]] = known_flat
         near = pixel_of_label[labels[ys, xs]]
-        points, self.point_of = np.unique(near, return_inverse=True)
+        points, self.point_of = _distinct(near, height * width)
         # Each point's (2r+1)^2 window, as indices into the band of distinct known pixels; -1: outside or missing.
         offsets = np.arange(-radius, radius + 1)
         window_y = (points // width)[:, None] + np.repeat(offsets, len(offsets))[None]
@@ -203,7 +203,7 @@ class _LocalError:
         inside = (window_y >= 0) & (window_y < height) & (window_x >= 0) & (window_x < width)
         flat = np.where(inside, window_y * width + window_x, 0)
         usable = inside & known.reshape(-1)[flat]
-        band, index = np.unique(flat[usable], return_inverse=True)
+        band, index = _distinct(flat[usable], height * width)
         self.window = np.full(flat.shape, -1, np.int64)
         self.window[usable] = index
         self.band_y, self.band_x = band // width, band % width
@@ -216,6 +216,16 @@ class _LocalError:
         per_point = np.empty(len(self.window), np.float32)
         _window_means(difference, np.ascontiguousarray(landed, dtype=np.bool_), self.window, per_point)
         return per_point[self.point_of]
+
+
+def _distinct(flat_indices: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(flat_indices, return_inverse=True) for indices into an array of ``size``: by marking, not sorting."""
+    seen = np.zeros(size, bool)
+    seen[flat_indices] = True
+    distinct = np.flatnonzero(seen)
+    position = np.empty(size, np.int64)
+    position[distinct] = np.arange(len(distinct))
+    return distinct, position[flat_indices]
 
 
 @njit(cache=True, nogil=True)

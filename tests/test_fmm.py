@@ -185,8 +185,8 @@ def fraction_within(result, flow: np.ndarray, mask: np.ndarray, tolerance: float
 
 
 def test_colour_weights_give_missing_pixels_the_flow_of_their_own_object():
-    """Measured: with colour 99.4 % of filled pixels within 0.5 px (wedge 93 %), mean EPE 0.04 px;
-    without colour 83.7 % (wedge 0 %: the blue flow is extruded straight down), mean EPE 0.50 px."""
+    """Measured (default radius 4): with colour 99.1 % of filled pixels within 0.5 px (wedge 91 %), mean EPE
+    0.04 px; without colour the blue flow is extruded straight down (wedge 0 %)."""
     flow, known, neighbour, wedge = two_objects()
     assert wedge.sum() == 900
     coloured = inpaint_motion(flow, known, neighbour)
