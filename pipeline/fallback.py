@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 
 def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4.0) -> np.ndarray:
@@ -27,11 +26,26 @@ def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4
     box = image[y0:y1, x0:x1]
     if box_missing.all():  # the hole fills its whole neighbourhood: look at the full frame instead
         box_missing, box, (y0, x0) = missing, image, (0, 0)
-    # Nearest known pixel for every pixel (indices of the closest False in box_missing).
-    _, (near_y, near_x) = ndimage.distance_transform_edt(box_missing, return_indices=True)
-    extended = box[near_y, near_x].astype(np.float32)
+    extended = box.astype(np.float32)
+    hole_y, hole_x = np.nonzero(box_missing)
+    near = nearest_known(box_missing, hole_y, hole_x)
+    extended[hole_y, hole_x] = extended.reshape(-1, *box.shape[2:])[near]
     smoothed = cv2.GaussianBlur(extended, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
     out = image.copy()
     region = out[y0:y0 + box.shape[0], x0:x0 + box.shape[1]]
     region[box_missing] = np.clip(smoothed[box_missing] + 0.5, 0, 255).astype(image.dtype)
     return out
+
+
+def nearest_known(missing: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """Flat index of the nearest known (not missing) pixel of each pixel (ys, xs): exact Euclidean distance
+    (OpenCV's precise distance transform; ties may go either way)."""
+    _, labels = cv2.distanceTransformWithLabels(missing.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE,
+                                                labelType=cv2.DIST_LABEL_PIXEL)
+    known = np.flatnonzero(~missing)
+    flat_labels = labels.reshape(-1)
+    if flat_labels[known[0]] == 1 and flat_labels[known[-1]] == len(known):
+        return known[labels[ys, xs] - 1]  # labels number the known pixels in raster order (OpenCV 4.x)
+    pixel_of_label = np.zeros(int(labels.max()) + 1, np.int64)
+    pixel_of_label[flat_labels[known]] = known
+    return pixel_of_label[labels[ys, xs]]

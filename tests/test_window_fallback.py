@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.fallback import smooth_fill
+from pipeline.fallback import nearest_known, smooth_fill
 from pipeline.window import sliding_window
 
 
@@ -65,3 +65,16 @@ def test_fill_with_nothing_known_or_nothing_missing():
     image = np.full((10, 10, 3), 50, np.uint8)
     assert (smooth_fill(image, np.zeros((10, 10), bool)) == image).all()
     assert smooth_fill(image, np.ones((10, 10), bool)).shape == image.shape
+
+
+def test_nearest_known_is_at_the_smallest_euclidean_distance():
+    rng = np.random.default_rng(7)
+    missing = rng.random((60, 90)) < 0.6
+    missing[:20, :40] = True  # a large hole: nearest pixels far away
+    ys, xs = np.nonzero(missing)
+    near = nearest_known(missing, ys, xs)
+    assert not missing.reshape(-1)[near].any()
+    known_y, known_x = np.nonzero(~missing)
+    brute = np.sqrt(((ys[:, None] - known_y[None]) ** 2 + (xs[:, None] - known_x[None]) ** 2).min(axis=1))
+    found = np.hypot(ys - near // 90, xs - near % 90)
+    np.testing.assert_allclose(found, brute, atol=1e-9)
