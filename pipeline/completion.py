@@ -49,7 +49,7 @@ import numpy as np
 from numba import njit
 
 from pipeline import fallback, fmm, local_flow, mosaic
-from pipeline.neighbours import WarpedNeighbour
+from pipeline.neighbours import WarpedNeighbour, shrink, shrink_all, shrink_any
 
 # What filled each pixel (CompletionResult.source).
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK = 0, 1, 2, 3
@@ -302,6 +302,11 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
                             filled_by=filled_by, fallback=remaining, corrected=corrected)
 
 
+def flow_scale(shape: tuple[int, int], config: CompletionConfig) -> float:
+    """Local flow's working resolution as a fraction of the frame's (``flow_max_side``)."""
+    return 1.0 if config.flow_max_side is None else min(1.0, config.flow_max_side / max(shape))
+
+
 def _by_distance(neighbours: Sequence[WarpedNeighbour]) -> list[int]:
     return sorted(range(len(neighbours)), key=lambda i: (abs(neighbours[i].offset), neighbours[i].offset))
 
@@ -345,7 +350,7 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     fill and on the local error's band.
     """
     height, width = missing.shape
-    scale = 1.0 if config.flow_max_side is None else min(1.0, config.flow_max_side / max(height, width))
+    scale = flow_scale((height, width), config)
     near_missing = _dilate(missing, round(NEAR_MISSING_PX / scale))
     rescue_focus = _dilate(missing, round(RESCUE_NEAR_MISSING_PX / scale))
     wanted = np.zeros((height, width), bool)
@@ -363,7 +368,7 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
         neighbour = neighbours[i]
         if not np.isfinite(errors[i]):
             continue  # no overlap to measure flow on
-        pieces = [_flow_in_box(view, *neighbour.crop(view.box), config) for view in views]
+        pieces = [_flow_in_box(view, *neighbour.crop(view.box, view.size), config) for view in views]
         fill = NeighbourFill(neighbour.offset, errors[i], pieces, (height, width), np.zeros((height, width), bool))
         colours, landed, motion = _local_warp(fill.inpainted_flow_at(points_y, points_x), neighbour, points_y,
                                               points_x)
@@ -397,34 +402,14 @@ class _BoxView:
         size = (max(round(width * scale), 8), max(round(height * scale), 8))
         if not (size[0] < width and size[1] < height):
             return _BoxView(box, None, 1.0, target[box], known[box], focus[box], near_missing[box])
-        return _BoxView(box, size, size[0] / width, _shrink(target[box], size), _shrink_all(known[box], size),
-                        _shrink_any(focus[box], size), _shrink_any(near_missing[box], size))
-
-    def shrink(self, image: np.ndarray) -> np.ndarray:
-        return image if self.size is None else _shrink(image, self.size)
-
-    def shrink_all(self, mask: np.ndarray) -> np.ndarray:
-        return mask if self.size is None else _shrink_all(mask, self.size)
-
-
-def _shrink(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-
-
-def _shrink_all(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """A coarse pixel is in only if all its fine pixels are."""
-    return _shrink(mask.astype(np.uint8) * 255, size) == 255
-
-
-def _shrink_any(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    return _shrink(mask.astype(np.uint8) * 255, size) > 0
+        return _BoxView(box, size, size[0] / width, shrink(target[box], size), shrink_all(known[box], size),
+                        shrink_any(focus[box], size), shrink_any(near_missing[box], size))
 
 
 def _flow_in_box(view: _BoxView, neighbour_rgb: np.ndarray, neighbour_valid: np.ndarray,
                  config: CompletionConfig) -> FlowPiece:
-    """Local flow and its motion inpainting in one box, from the neighbour's crop of it, at the box view's
+    """Local flow and its motion inpainting in one box, from the neighbour's crop of it at the box view's
     working resolution."""
-    neighbour_rgb, neighbour_valid = view.shrink(neighbour_rgb), view.shrink_all(neighbour_valid)
     flow = local_flow.local_flow(view.target, view.known, neighbour_rgb, neighbour_valid, config.flow,
                                  focus=view.focus)
     trusted = flow.common if flow.reliable is None else flow.reliable

@@ -13,7 +13,8 @@ missing mask in pipeline/warping.py).
 
 from __future__ import annotations
 
-from typing import Mapping
+import threading
+from typing import Callable, Mapping
 
 import cv2
 import numpy as np
@@ -57,7 +58,8 @@ class WarpedNeighbour:
     """
 
     def __init__(self, offset: int, rgb: np.ndarray | None = None, valid: np.ndarray | None = None, *,
-                 original: np.ndarray | None = None, other_from_stab: np.ndarray | None = None) -> None:
+                 original: np.ndarray | None = None, other_from_stab: np.ndarray | None = None,
+                 small_original: Callable[[], np.ndarray] | None = None) -> None:
         if (rgb is None) == (original is None) or (rgb is None) != (valid is None) or \
                 (original is None) != (other_from_stab is None):
             raise ValueError("give either rgb and valid, or original and other_from_stab")
@@ -65,6 +67,9 @@ class WarpedNeighbour:
         self._rgb, self._valid = rgb, valid
         self.original = original
         self.other_from_stab = None if other_from_stab is None else np.asarray(other_from_stab, np.float64)
+        # A downscaled (INTER_AREA) copy of the original, shared by every frame this one is a neighbour of:
+        # crops at a working resolution are warped from it instead of warped whole-size and shrunk.
+        self._small_original = small_original
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -88,8 +93,15 @@ class WarpedNeighbour:
         self._warp_whole()
         return self._valid
 
-    def crop(self, box: tuple[slice, slice]) -> tuple[np.ndarray, np.ndarray]:
-        """(rgb, valid) of the box only (what ``rgb[box]``, ``valid[box]`` are, without the rest)."""
+    def crop(self, box: tuple[slice, slice], size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(rgb, valid) of the box only (what ``rgb[box]``, ``valid[box]`` are, without the rest); with ``size``
+        (width, height), shrunk to it as ``shrink`` and ``shrink_all`` would (taken from the downscaled original
+        when there is one: nearly the same, a fraction of the work)."""
+        if size is not None:
+            if self._small_original is not None and self._rgb is None:
+                return self._crop_small(box, size)
+            rgb, valid = self.crop(box)
+            return shrink(rgb, size), shrink_all(valid, size)
         if self._rgb is not None:
             return self._rgb[box], self._valid[box]
         rows, cols = box
@@ -98,6 +110,24 @@ class WarpedNeighbour:
         orig_from_box = self.other_from_stab @ stab_from_box
         rgb = warping.warp(self.original, orig_from_box, size)
         coverage = warping.warp(np.full(self.original.shape[:2], 255, np.uint8), orig_from_box, size)
+        missing = coverage < 255
+        rgb[missing] = 0
+        return rgb, ~missing
+
+    def _crop_small(self, box: tuple[slice, slice], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        small = self._small_original()
+        rows, cols = box
+        height, width = self.original.shape[:2]
+        # Pixel centres: a pixel u of an image shrunk by s from a full-size one sits at (u + 0.5) / s - 0.5.
+        step_x, step_y = (cols.stop - cols.start) / size[0], (rows.stop - rows.start) / size[1]
+        stab_from_work = np.array([[step_x, 0.0, cols.start + 0.5 * step_x - 0.5],
+                                   [0.0, step_y, rows.start + 0.5 * step_y - 0.5], [0.0, 0.0, 1.0]])
+        scale_x, scale_y = small.shape[1] / width, small.shape[0] / height
+        small_from_orig = np.array([[scale_x, 0.0, 0.5 * scale_x - 0.5], [0.0, scale_y, 0.5 * scale_y - 0.5],
+                                    [0.0, 0.0, 1.0]])
+        small_from_work = small_from_orig @ self.other_from_stab @ stab_from_work
+        rgb = warping.warp(small, small_from_work, size)
+        coverage = warping.warp(np.full(small.shape[:2], 255, np.uint8), small_from_work, size)
         missing = coverage < 255
         rgb[missing] = 0
         return rgb, ~missing
@@ -131,16 +161,60 @@ class WarpedNeighbour:
 
 
 def warp_neighbours(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: np.ndarray,
-                    orig_from_stab_t: np.ndarray) -> list[WarpedNeighbour]:
+                    orig_from_stab_t: np.ndarray, *, downscaled: Downscaled | None = None) -> list[WarpedNeighbour]:
     """Original neighbour frames {t': rgb} as lazy neighbours in frame t's stabilized coordinates, nearest first.
 
     A neighbour's pixel for stabilized point p of frame t is at t'_from_t @ S_t p; the chain t'_from_t is
-    at most ``radius`` inter-frame transforms long.
+    at most ``radius`` inter-frame transforms long. ``downscaled``: where their downscaled copies are kept.
     """
     if not frames:
         return []
     first, last = min(frames), max(frames)
     t_from = smoothing.neighbour_transforms(curr_from_prev, t, min(first, t), max(last, t))
+
+    def small_of(index: int) -> Callable[[], np.ndarray] | None:
+        return None if downscaled is None else lambda: downscaled.get(index, frames[index])
+
     return [WarpedNeighbour(t_other - t, original=frames[t_other],
-                            other_from_stab=np.linalg.inv(t_from[t_other]) @ orig_from_stab_t)
+                            other_from_stab=np.linalg.inv(t_from[t_other]) @ orig_from_stab_t,
+                            small_original=small_of(t_other))
             for t_other in sorted(frames, key=lambda i: (abs(i - t), i))]
+
+
+class Downscaled:
+    """Frames shrunk to ``size`` (INTER_AREA) by frame index, each made once while it is in the window.
+    Thread-safe (frames are rendered on several threads)."""
+
+    def __init__(self, size: tuple[int, int]) -> None:
+        self.size = size  # (width, height)
+        self._frames: dict[int, np.ndarray] = {}
+        self._lock = threading.Lock()
+
+    def get(self, index: int, rgb: np.ndarray) -> np.ndarray:
+        with self._lock:
+            small = self._frames.get(index)
+        if small is None:  # two threads may both make it: same pixels, no harm
+            small = shrink(rgb, self.size)
+            with self._lock:
+                self._frames[index] = small
+        return small
+
+    def forget_before(self, index: int) -> None:
+        with self._lock:
+            for old in [i for i in self._frames if i < index]:
+                del self._frames[old]
+
+
+def shrink(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` resized to ``size`` (width, height) by area averaging."""
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+
+
+def shrink_all(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``mask`` resized to ``size``: a coarse pixel is in only if all its fine pixels are."""
+    return shrink(mask.astype(np.uint8) * 255, size) == 255
+
+
+def shrink_any(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``mask`` resized to ``size``: a coarse pixel is in if any of its fine pixels is."""
+    return shrink(mask.astype(np.uint8) * 255, size) > 0

@@ -9,6 +9,7 @@ Every stage's result goes to the observer.
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -281,7 +282,24 @@ class _FrameRenderer:
         self.segment_of = np.searchsorted(smoothed.segment_starts, np.arange(len(self.orig_from_stab)),
                                           side="right") - 1
         self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
+        self.downscaled: neighbours.Downscaled | None = None  # frames at completion's flow resolution
+        self._downscaled_lock = threading.Lock()
         self.keep_events = keep_events
+
+    def _downscaled(self, shape: tuple[int, int], t: int) -> neighbours.Downscaled | None:
+        """The frames at local flow's working resolution (each shrunk once for all the frames it is a neighbour
+        of); None when that is full resolution."""
+        scale = completion.flow_scale(shape, self.config.completion)
+        if scale >= 1.0:
+            return None
+        size = (max(round(shape[1] * scale), 1), max(round(shape[0] * scale), 1))
+        with self._downscaled_lock:
+            if self.downscaled is None or self.downscaled.size != size:
+                self.downscaled = neighbours.Downscaled(size)
+            downscaled = self.downscaled
+        # A few frames of slack: frames are rendered a little out of order on several threads.
+        downscaled.forget_before(t - self.config.completion.radius - 8)
+        return downscaled
 
     def __call__(self, window: Windowed[video_io.Frame]) -> _RenderedFrame:
         config = self.config
@@ -307,7 +325,8 @@ class _FrameRenderer:
         warped: list[neighbours.WarpedNeighbour] = []
         if config.mode == "full":
             near = {i: rgb for i, rgb in same_shot.items() if abs(i - t) <= config.completion.radius}
-            warped = neighbours.warp_neighbours(near, t, self.curr_from_prev, self.orig_from_stab[t])
+            warped = neighbours.warp_neighbours(near, t, self.curr_from_prev, self.orig_from_stab[t],
+                                                downscaled=self._downscaled(frame.rgb.shape[:2], t))
             completed = completion.complete(stabilized.frame, stabilized.missing, warped, config.completion)
             emit("completion", completed)
             output, output_valid = completed.frame, None

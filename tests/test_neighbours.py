@@ -16,7 +16,7 @@ from scipy import ndimage
 from skimage import data
 
 from pipeline import completion, mosaic, smoothing, warping
-from pipeline.neighbours import WarpedNeighbour, warp_neighbours
+from pipeline.neighbours import Downscaled, WarpedNeighbour, shrink, shrink_all, warp_neighbours
 
 H, W = 240, 320
 
@@ -453,3 +453,31 @@ def test_local_error_against_brute_force(target, region):
     assert differs.mean() <= (0.0 if region == "strip" else 0.05)
     assert np.abs(errors - all_exact)[~differs].max() <= 1e-3
     assert np.abs(errors - all_exact).max() <= 10.0
+
+
+@pytest.mark.parametrize("name", sorted(TRANSFORMS))
+def test_crops_at_a_working_size_from_the_downscaled_original_match_crop_then_shrink(photo, name):
+    """Warping the shared downscaled copy (a third of the size, as at 1080p) instead of warping whole-size and
+    shrinking: measured mean difference 1.1 levels on this photo, validity equal but on its 1-px boundary."""
+    large = cv2.resize(photo, (3 * W, 3 * H), interpolation=cv2.INTER_CUBIC)
+    stab_from_large = np.diag([1 / 3, 1 / 3, 1.0])
+    other_from_stab = np.linalg.inv(stab_from_large) @ TRANSFORMS[name] @ stab_from_large
+    downscaled = Downscaled((W, H))
+    direct = WarpedNeighbour(1, original=large, other_from_stab=other_from_stab)
+    via_small = WarpedNeighbour(1, original=large, other_from_stab=other_from_stab,
+                                small_original=lambda: downscaled.get(7, large))
+    for box in [(slice(0, 3 * H), slice(0, 3 * W)), (slice(30, 400), slice(500, 960)), (slice(11, 131), slice(7, 300))]:
+        size = (round((box[1].stop - box[1].start) / 3), round((box[0].stop - box[0].start) / 3))
+        rgb, valid = via_small.crop(box, size)
+        want_rgb, want_valid = direct.crop(box, size)
+        np.testing.assert_array_equal(want_rgb, shrink(direct.crop(box)[0], size))
+        np.testing.assert_array_equal(want_valid, shrink_all(direct.crop(box)[1], size))
+        assert rgb.shape == want_rgb.shape and valid.shape == want_valid.shape
+        assert (valid != want_valid).sum() <= (_boundary(want_valid) | _boundary(valid)).sum()
+        both = valid & want_valid
+        assert both.mean() > 0.5
+        assert np.abs(rgb[both].astype(float) - want_rgb[both]).mean() < 1.5
+        assert not rgb[~valid].any()
+    assert len(downscaled._frames) == 1  # made once, shared
+    downscaled.forget_before(8)
+    assert not downscaled._frames
