@@ -244,8 +244,15 @@ def _window_means(difference: np.ndarray, landed: np.ndarray, window: np.ndarray
 
 
 def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
-             config: CompletionConfig = CompletionConfig()) -> CompletionResult:
-    """Fill ``missing`` pixels of the stabilized ``target`` from its warped neighbours."""
+             config: CompletionConfig = CompletionConfig(), *,
+             target_original: WarpedNeighbour | None = None) -> CompletionResult:
+    """Fill ``missing`` pixels of the stabilized ``target`` from its warped neighbours.
+
+    ``target_original``: frame t itself as a lazy neighbour (offset 0, with its downscaled copy), so that the
+    local flow's reduced-resolution crops of frame t are resampled as the neighbours' are (from the downscaled
+    copy); without it they are shrunk from ``target``. Mixing the two (neighbours from the copy, frame t shrunk
+    after warping) cost 1.2 dB on a 1080p scene: the neighbours came out slightly blurrier than frame t.
+    """
     height, width = missing.shape
     source = np.where(missing, SOURCE_FALLBACK, SOURCE_ORIGINAL).astype(np.uint8)
     filled_by = np.zeros((height, width), np.int16)
@@ -279,7 +286,7 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
         if wanted.any():
             order, errors = _priority(target, known, neighbours, config.max_warp_neighbours)
             fills, candidates = _local_warps(target, known, missing, neighbours, order, errors, ys, xs, wanted,
-                                             at_missing, local_error, config)
+                                             at_missing, local_error, config, target_original)
         if fills:
             chosen = _best_candidate(candidates)
             take = wanted & (chosen >= 0)
@@ -342,7 +349,7 @@ def _priority(target: np.ndarray, known: np.ndarray, neighbours: Sequence[Warped
 def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
                  order: list[int], errors: list[float], ys: np.ndarray, xs: np.ndarray, want: np.ndarray,
                  at_missing: list[tuple[np.ndarray, np.ndarray]], local_error: _LocalError, config: CompletionConfig,
-                 ) -> tuple[list[NeighbourFill], list[_Candidate]]:
+                 target_original: WarpedNeighbour | None = None) -> tuple[list[NeighbourFill], list[_Candidate]]:
     """Steps 2-4 for the nearest ``max_warp_neighbours`` neighbours: local flow, motion inpainting, local warp.
 
     ``want``: which of the pixels to fill (ys, xs) need it. Flow and motion inpainting run inside boxes around
@@ -356,7 +363,7 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     wanted = np.zeros((height, width), bool)
     wanted[ys[want], xs[want]] = True
     works = _work_boxes(wanted, None if config.flow_margin_px is None else round(config.flow_margin_px / scale))
-    views = [_BoxView.of(work, target, known, rescue_focus, near_missing, scale) for work in works]
+    views = [_BoxView.of(work, target, known, rescue_focus, near_missing, scale, target_original) for work in works]
     points_y = np.concatenate([ys, local_error.band_y])
     points_x = np.concatenate([xs, local_error.band_x])
     m = len(ys)
@@ -397,13 +404,17 @@ class _BoxView:
 
     @staticmethod
     def of(box: tuple[slice, slice], target: np.ndarray, known: np.ndarray, focus: np.ndarray,
-           near_missing: np.ndarray, scale: float) -> _BoxView:
+           near_missing: np.ndarray, scale: float, target_original: WarpedNeighbour | None = None) -> _BoxView:
         height, width = box[0].stop - box[0].start, box[1].stop - box[1].start
         size = (max(round(width * scale), 8), max(round(height * scale), 8))
         if not (size[0] < width and size[1] < height):
             return _BoxView(box, None, 1.0, target[box], known[box], focus[box], near_missing[box])
-        return _BoxView(box, size, size[0] / width, shrink(target[box], size), shrink_all(known[box], size),
-                        shrink_any(focus[box], size), shrink_any(near_missing[box], size))
+        if target_original is not None:
+            small_target, small_known = target_original.crop(box, size)  # resampled as the neighbours are
+        else:
+            small_target, small_known = shrink(target[box], size), shrink_all(known[box], size)
+        return _BoxView(box, size, size[0] / width, small_target, small_known, shrink_any(focus[box], size),
+                        shrink_any(near_missing[box], size))
 
 
 def _flow_in_box(view: _BoxView, neighbour_rgb: np.ndarray, neighbour_valid: np.ndarray,

@@ -325,9 +325,13 @@ class _FrameRenderer:
         warped: list[neighbours.WarpedNeighbour] = []
         if config.mode == "full":
             near = {i: rgb for i, rgb in same_shot.items() if abs(i - t) <= config.completion.radius}
+            downscaled = self._downscaled(frame.rgb.shape[:2], t)
             warped = neighbours.warp_neighbours(near, t, self.curr_from_prev, self.orig_from_stab[t],
-                                                downscaled=self._downscaled(frame.rgb.shape[:2], t))
-            completed = completion.complete(stabilized.frame, stabilized.missing, warped, config.completion)
+                                                downscaled=downscaled)
+            itself = neighbours.warp_neighbours({t: frame.rgb}, t, self.curr_from_prev, self.orig_from_stab[t],
+                                                downscaled=downscaled)[0]
+            completed = completion.complete(stabilized.frame, stabilized.missing, warped, config.completion,
+                                            target_original=itself)
             emit("completion", completed)
             output, output_valid = completed.frame, None
         elif config.mode == "crop":
