@@ -136,3 +136,24 @@ def test_stream_frames_renders_a_shaky_clip_lazily():
     assert np.median(shifts) > 2.0  # the camera shakes between frames (without jitter: 0.2 px, the slow drift)
     with pytest.raises(ValueError, match="pan_px_per_frame=0"):
         next(synthetic.stream_frames(synthetic.SyntheticConfig(n_frames=5)))
+
+
+def test_targets_compare_ffviz_with_its_peers_and_the_1080p_goal():
+    from ffviz.bench import BenchRow
+    from ffviz.bench_report import targets
+
+    def row(clip, method, size, seconds=None):
+        return BenchRow(clip, method, *size, 60, seconds_runs=[] if seconds is None else [seconds])
+
+    rows = [row("a.mp4", "input", (640, 360)), row("a.mp4", "ffviz full", (640, 360), 30.0),
+            row("a.mp4", "opencv", (640, 360), 10.0), row("a.mp4", "ffviz none", (640, 360), 6.0),
+            row("a.mp4", "vidstab", (640, 360), 3.0),
+            row("hd.mp4", "input", (1920, 1080)), row("hd.mp4", "ffviz full", (1920, 1080), 15.0)]
+    text = "\n".join(targets(rows))
+    assert "ffviz full 2.00 fps vs opencv 6.00 fps = 0.33x" in text
+    assert "ffviz none 10.00 fps vs vidstab 20.00 fps = 0.50x" in text
+    assert "ffviz crop vs vidstab: n/a (ffviz crop not measured)" in text
+    assert "hd.mp4: ffviz full 4.00 fps vs the 3 fps target: met" in text
+    slow = "\n".join(targets(rows[:-1] + [row("hd.mp4", "ffviz full", (1920, 1080), 30.0)]))
+    assert "hd.mp4: ffviz full 2.00 fps vs the 3 fps target: not met" in slow
+    assert any("no clip of 1080+ rows" in line for line in targets(rows[:5]))
