@@ -4,8 +4,9 @@ Completion looks at a neighbour in few places: at the missing pixels (mosaic, eq
 known pixels around them (the local alignment error), inside the small boxes where local flow is computed,
 and at p + F(p) for the local warp (eq. 25). Warping every neighbour over the whole frame (12 neighbours, two
 warps each) was 17% of full mode's time at 640x360 and grows with the frame's area; here each look warps or
-samples just what it needs, straight from the original frame. Deblurring, which does need whole frames, gets
-them on first use (``rgb``, ``valid``), once.
+samples just what it needs, straight from the original frame. Whole frames (``rgb``, ``valid``) are warped on
+first use, once; deblurring warps only the colours itself and works out coverage from ``other_from_stab``
+(pipeline/deblur.py).
 
 A pixel is valid when every bilinear tap of its sample lies inside the original frame (as the target's own
 missing mask in pipeline/warping.py).
@@ -22,7 +23,7 @@ import numpy as np
 from pipeline import smoothing, warping
 
 _MAP_COLUMNS = 4096
-_TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within this of the edge weighs nothing
+TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within this of the edge weighs nothing
 
 
 def remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray,
@@ -75,6 +76,11 @@ class WarpedNeighbour:
     def shape(self) -> tuple[int, int]:
         image = self._rgb if self._rgb is not None else self.original
         return image.shape[:2]
+
+    @property
+    def warped_whole(self) -> bool:
+        """Whether the whole-frame ``rgb`` and ``valid`` are at hand (given, or warped on an earlier look)."""
+        return self._rgb is not None
 
     def _warp_whole(self) -> None:
         if self._rgb is None:
@@ -148,8 +154,8 @@ class WarpedNeighbour:
             src_y = ((m[1, 0] * x + m[1, 1] * y + m[1, 2]) / w).astype(np.float32)
             colours = remap_points(self.original, src_x, src_y)
             height, width = self.original.shape[:2]
-            valid = ((src_x > -_TAP_SLACK) & (src_x < width - 1 + _TAP_SLACK)
-                     & (src_y > -_TAP_SLACK) & (src_y < height - 1 + _TAP_SLACK))
+            valid = ((src_x > -TAP_SLACK) & (src_x < width - 1 + TAP_SLACK)
+                     & (src_y > -TAP_SLACK) & (src_y < height - 1 + TAP_SLACK))
         colours[~valid] = 0
         return colours.reshape(shape + (3,)), valid.reshape(shape)
 

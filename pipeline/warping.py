@@ -24,15 +24,18 @@ class WarpResult:
 
 
 def warp(image: np.ndarray, orig_from_out: np.ndarray, size: tuple[int, int] | None = None, *,
-         interpolation: int = cv2.INTER_LINEAR, border_value: float = 0) -> np.ndarray:
-    """out(p) = image(orig_from_out p), for an affine or projective 3x3 transform."""
+         interpolation: int = cv2.INTER_LINEAR, border_value: float = 0, out: np.ndarray | None = None) -> np.ndarray:
+    """out(p) = image(orig_from_out p), for an affine or projective 3x3 transform. ``out``: a contiguous array of
+    the result's shape and type to write into (returned), instead of a new one."""
     height, width = image.shape[:2]
     out_size = size or (width, height)
     flags = interpolation | cv2.WARP_INVERSE_MAP
     m = np.asarray(orig_from_out, dtype=np.float64)
     if np.allclose(m[2], [0.0, 0.0, 1.0]):
-        return cv2.warpAffine(image, m[:2], out_size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=border_value)
-    return cv2.warpPerspective(image, m, out_size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=border_value)
+        return cv2.warpAffine(image, m[:2], out_size, dst=out, flags=flags, borderMode=cv2.BORDER_CONSTANT,
+                              borderValue=border_value)
+    return cv2.warpPerspective(image, m, out_size, dst=out, flags=flags, borderMode=cv2.BORDER_CONSTANT,
+                               borderValue=border_value)
 
 
 def warp_frame(rgb: np.ndarray, orig_from_out: np.ndarray) -> WarpResult:
