@@ -435,8 +435,9 @@ def _work_boxes(wanted: np.ndarray, margin: int | None) -> list[tuple[slice, sli
     """Where flows are computed: a box around each cluster of pixels that need a local warp, grown by
     ``margin`` (boxes that would overlap are merged); ``margin`` None: the whole frame.
 
-    The pixels needing a local warp are usually a few small clusters (the mosaic fills ~93% of the missing
-    area), so this is a small fraction of the frame, where one box around all of them was 80-90% of it."""
+    The pixels needing a local warp are what the mosaic left (it fills ~93% of the missing area): on synthetic
+    clips a few small clusters, a small fraction of the frame, where one box around all of them was 80-90% of
+    it; on a real clip with wide borders on both sides (vplab_C) the boxes still average 72% of the frame."""
     height, width = wanted.shape
     if margin is None:
         return [(slice(0, height), slice(0, width))]
