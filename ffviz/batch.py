@@ -32,13 +32,14 @@ class VideoJob:
     output: Path
     config: stab.StabilizeConfig
     crf: int = 18
+    preset: str = "medium"
     rrd: Path | None = None
     record_level: str = "summary"
     jpeg_quality: int | None = 80
 
     def settings(self) -> str:
         """What the output depends on besides the input file (compared on re-runs)."""
-        return repr((self.config, self.crf))
+        return repr((self.config, self.crf, self.preset))
 
 
 @dataclass
@@ -136,11 +137,11 @@ def stabilize_one(job: VideoJob, segment_frames: int = 0, mapper: segments.Mappe
         if segment_frames:
             report = segments.run(job.input, job.output, job.config, segment_frames=segment_frames,
                                   mapper=mapper or segments.serial_map, observer=observer, overwrite=True,
-                                  crf=job.crf)
+                                  crf=job.crf, preset=job.preset)
         else:
             # One core per Ray task (num_cpus=1): the task's frames are rendered on one thread.
             report = stab.stabilize(job.input, job.output, job.config, observer=observer, overwrite=True, crf=job.crf,
-                                    workers=1)
+                                    preset=job.preset, workers=1)
         _write_marker(job)
     except Exception as error:  # noqa: BLE001 - reported in the summary, the other videos go on
         if recorder is not None:
@@ -290,7 +291,7 @@ def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig) -> list[Vi
     rrd_dir = None
     if args.rrd is not None:
         rrd_dir = outdir / "recordings" if args.rrd == Path("AUTO") else args.rrd
-    return [VideoJob(i.absolute(), o.absolute(), config, crf=args.crf,
+    return [VideoJob(i.absolute(), o.absolute(), config, crf=args.crf, preset=args.preset,
                      rrd=(rrd_dir / f"{i.stem}.rrd").absolute() if rrd_dir else None,
                      record_level=args.record, jpeg_quality=None if args.lossless else 80)
             for i, o in zip(inputs, output_paths(inputs, outdir))]

@@ -14,7 +14,7 @@ import traceback
 from pathlib import Path
 from typing import Sequence
 
-from pipeline import deblur, motion, smoothing, stabilize as stab
+from pipeline import deblur, motion, smoothing, stabilize as stab, video_io
 from pipeline.errors import ConfigError, FFVizError
 from pipeline.observer import Observer, Observers
 
@@ -111,6 +111,9 @@ def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None 
                    help="frames to step through every stage in the recording (timelines 'stage' and 'fmm_step'); "
                         "'none' for none (default: 3 frames with missing area at --record full, none at summary)")
     p.add_argument("--crf", type=int, default=18, help="x264 quality of the output (lower is better; default: %(default)s)")
+    p.add_argument("--preset", choices=video_io.X264_PRESETS, default="medium",
+                   help="x264 speed against file size at the same --crf quality: faster presets encode sooner into "
+                        "larger files (default: %(default)s)")
     p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
                    help="frames processed at once, on threads (default: one per CPU core); the output is the same")
 
@@ -168,7 +171,7 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
                                  trace_frames=args.trace_frames)
     try:
         report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
-                                progress=tqdm_progress, overwrite=overwrite, crf=args.crf,
+                                progress=tqdm_progress, overwrite=overwrite, crf=args.crf, preset=args.preset,
                                 workers=getattr(args, "workers", None))
     except BaseException:
         if recorder is not None:

@@ -102,7 +102,8 @@ def render_segment(path: Path, config: stab.StabilizeConfig, frames: range, curr
 
 def run(input_path: Path | str, output_path: Path | str | None, config: stab.StabilizeConfig = stab.StabilizeConfig(),
         *, segment_frames: int, mapper: Mapper = serial_map, observer: Observer | None = None,
-        overwrite: bool = False, crf: int = 18, on_segment: Callable[[int, int], None] | None = None,
+        overwrite: bool = False, crf: int = 18, preset: str = "medium",
+        on_segment: Callable[[int, int], None] | None = None,
         ) -> stab.StabilizeReport:
     """Stabilize one video segment by segment (``mapper`` decides where the segments run).
 
@@ -144,7 +145,7 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
     writer = None
     if output_path is not None:
         writer = video_io.VideoWriter(output_path, like=info, audio_from=info.path if info.has_audio else None,
-                                      crf=crf)
+                                      crf=crf, preset=preset)
     try:
         written = 0
         for done, segment in enumerate(mapper(render_segment, jobs), start=1):

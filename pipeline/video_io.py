@@ -539,6 +539,10 @@ class _AudioPassthrough:
         self._container.close()
 
 
+X264_PRESETS: tuple[str, ...] = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow",
+                                 "slower", "veryslow")
+
+
 class VideoWriter:
     """Writes RGB frames as H.264 (libx264, yuv420p) with the input's timestamps, atomically.
 

@@ -223,3 +223,33 @@ def test_full_mode_records_every_completion_intermediate(shaky, tmp_path):
     # Full frame: the output keeps no black border from the missing areas.
     _, frames = frame_stats(out)
     assert max(np.mean(np.all(f < 8, axis=2)) for f in frames) < 1e-3
+
+
+def _x264_settings(path) -> str:
+    """The options string x264 writes into the stream's first SEI ("x264 - core ... options: ...")."""
+    with av.open(str(path)) as container:
+        packet = next(container.demux(video=0))
+        data = bytes(packet)
+    start = data.index(b"options: ")
+    return data[start:data.index(b"\x00", start)].decode("ascii", "replace")
+
+
+def test_cli_preset_sets_the_encoders_speed_and_keeps_the_frames_close(shaky, tmp_path, capsys):
+    path, video = shaky
+    outs = {}
+    for preset in ("ultrafast", "medium"):
+        outs[preset] = tmp_path / f"out_{preset}.mp4"
+        assert cli.main(["stabilize", str(path), "-o", str(outs[preset]), "--mode", "crop", "--no-deblur",
+                         "--preset", preset, "--rrd", str(tmp_path / f"{preset}.rrd")]) == 0
+    fast, medium = (_x264_settings(outs[p]) for p in ("ultrafast", "medium"))
+    # What distinguishes the presets in x264's own record: ultrafast turns off CABAC and subpixel refinement.
+    assert "cabac=0" in fast and "subme=0" in fast
+    assert "cabac=1" in medium and "subme=7" in medium and "crf=18.0" in medium and "crf=18.0" in fast
+    (_, fast_frames), (_, medium_frames) = frame_stats(outs["ultrafast"]), frame_stats(outs["medium"])
+    assert len(fast_frames) == len(medium_frames) == video.n_frames
+    assert min(synthetic.psnr(a, b) for a, b in zip(fast_frames, medium_frames)) > 35
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as refused:  # argparse's own refusal: usage and one error line, exit 2
+        cli.main(["stabilize", str(path), "-o", str(tmp_path / "x.mp4"), "--preset", "warp9"])
+    assert refused.value.code == 2 and "invalid choice: 'warp9'" in capsys.readouterr().err
+    assert not (tmp_path / "x.mp4").exists()
