@@ -73,12 +73,12 @@ boundary (tests/test_deblur.py)
     sampler measured ~2x slower than it; whole-frame warps already at hand are used as they are). The error's
     low-res copy of it is INTER_AREA of that warp (warping a downscaled original instead saved no measurable
     time and agreed less with the old result: 58 against 74 dB). Which pixels it covers is solved per row from
-    its transform, a run of columns (WarpedNeighbour.sample's rule: every bilinear tap inside the frame), and so is the share of
-    valid pixels in each low-res cell; no coverage mask is warped. The error stays low-res: the upsampled
-    error is a convex combination of four low-res values, so it can exceed ``reject_error`` only next to a
-    low-res value that does, and only those bands of rows are upsampled, thresholded and dilated. Then one pass
-    over the rows adds every neighbour to a row's sums while they are in cache, upsampling E on the fly, and
-    divides (eq. 30). Blurriness maps (``EnergyCache``) are filtered and reduced in one pass too. Measured
+    its transform, a run of columns (WarpedNeighbour.sample's rule: every bilinear tap inside the frame), and
+    so is the share of valid pixels in each low-res cell; no coverage mask is warped. The error stays low-res:
+    the upsampled error is a convex combination of four low-res values, so it can exceed ``reject_error`` only
+    next to a low-res value that does, and only those bands of rows are upsampled, thresholded and dilated.
+    Then one pass over the rows adds every neighbour to a row's sums while they are in cache, upsampling E on
+    the fly, and divides (eq. 30). Blurriness maps (``EnergyCache``) are filtered and reduced in one pass too. Measured
     through stabilize_source (24-frame pipeline.synthetic clips, one worker, mean per frame, none / full mode):
     640x360 26 -> 20 / 25 -> 18 ms, 1920x1080 185 -> 99 / 177 -> 93 ms; what is left is mostly the colour
     warps and the blending pass.
@@ -90,7 +90,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-import threading
 from typing import Mapping, Sequence
 
 import cv2
@@ -100,6 +99,7 @@ from pipeline import deblur_kernels as kernels
 from pipeline import geometry, smoothing, warping
 from pipeline.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
 from pipeline.mosaic import INTENSITY_WEIGHTS, intensity
+from pipeline.window import PerFrame
 
 # Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
 # and scale with the frame height (blur, in pixels, grows with the resolution).
@@ -184,26 +184,11 @@ def blurriness(gray_or_rgb: np.ndarray, valid_mask: np.ndarray | None = None) ->
     return _inverse(float(np.mean(energy, dtype=np.float64)))
 
 
-class EnergyCache:
+class EnergyCache(PerFrame[np.ndarray, np.ndarray]):
     """Gradient-energy maps of frames by index, so that each frame of a streaming window is filtered once."""
 
     def __init__(self) -> None:
-        self._maps: dict[int, np.ndarray] = {}
-        self._lock = threading.Lock()  # frames are rendered on several threads (pipeline/parallel.py)
-
-    def get(self, index: int, rgb: np.ndarray) -> np.ndarray:
-        with self._lock:
-            energy = self._maps.get(index)
-        if energy is None:  # two threads may both compute it: same values, no harm
-            energy = _downscaled_energy(rgb)
-            with self._lock:
-                self._maps[index] = energy
-        return energy
-
-    def forget_before(self, index: int) -> None:
-        with self._lock:
-            for old in [i for i in self._maps if i < index]:
-                del self._maps[old]
+        super().__init__(_downscaled_energy)
 
 
 def window_blurriness(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: np.ndarray, *,
@@ -305,7 +290,7 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
                 warping.warp(n.original, n.other_from_stab, out=rgb)
                 first, last = kernels.covered_spans(n.other_from_stab, n.original.shape[0], n.original.shape[1],
                                                      height, width, TAP_SLACK)
-                kernels.zero_outside_spans(rgb, first, last)  # the whole-frame warp's black: it enters the low-res copy
+                kernels.zero_outside_spans(rgb, first, last)  # the whole-frame warp's black enters the low-res copy
                 mask = None
                 np.maximum(first, grid.target_first, out=first)
                 np.minimum(last, grid.target_last, out=last)
@@ -315,7 +300,7 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
                 mask = n.valid & target_valid
                 first, last, exact = kernels.row_runs(mask)
             weight = kernels.area_coverage(first, last, exact, target_valid if mask is None else mask,
-                                    *grid.area_tables)  # INTER_AREA of the valid pixels
+                                           *grid.area_tables)  # INTER_AREA of the valid pixels
             if not weight.any():
                 continue
             small = rgb if grid.factor == 1 else cv2.resize(rgb, grid.small_size, interpolation=cv2.INTER_AREA)

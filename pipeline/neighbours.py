@@ -14,13 +14,13 @@ missing mask in pipeline/warping.py).
 
 from __future__ import annotations
 
-import threading
 from typing import Callable, Mapping
 
 import cv2
 import numpy as np
 
 from pipeline import smoothing, warping
+from pipeline.window import PerFrame
 
 _MAP_COLUMNS = 4096
 TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within this of the edge weighs nothing
@@ -187,28 +187,13 @@ def warp_neighbours(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: np
             for t_other in sorted(frames, key=lambda i: (abs(i - t), i))]
 
 
-class Downscaled:
-    """Frames shrunk to ``size`` (INTER_AREA) by frame index, each made once while it is in the window.
-    Thread-safe (frames are rendered on several threads)."""
+class Downscaled(PerFrame[np.ndarray, np.ndarray]):
+    """Frames shrunk to ``size`` (width, height; INTER_AREA) by frame index, each made once while it is in the
+    window."""
 
     def __init__(self, size: tuple[int, int]) -> None:
-        self.size = size  # (width, height)
-        self._frames: dict[int, np.ndarray] = {}
-        self._lock = threading.Lock()
-
-    def get(self, index: int, rgb: np.ndarray) -> np.ndarray:
-        with self._lock:
-            small = self._frames.get(index)
-        if small is None:  # two threads may both make it: same pixels, no harm
-            small = shrink(rgb, self.size)
-            with self._lock:
-                self._frames[index] = small
-        return small
-
-    def forget_before(self, index: int) -> None:
-        with self._lock:
-            for old in [i for i in self._frames if i < index]:
-                del self._frames[old]
+        super().__init__(lambda rgb: shrink(rgb, size))
+        self.size = size
 
 
 def shrink(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:

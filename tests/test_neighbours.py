@@ -478,6 +478,6 @@ def test_crops_at_a_working_size_from_the_downscaled_original_match_crop_then_sh
         assert both.mean() > 0.5
         assert np.abs(rgb[both].astype(float) - want_rgb[both]).mean() < 1.5
         assert not rgb[~valid].any()
-    assert len(downscaled._frames) == 1  # made once, shared
+    assert len(downscaled._by_frame) == 1  # made once, shared
     downscaled.forget_before(8)
-    assert not downscaled._frames
+    assert not downscaled._by_frame
