@@ -188,13 +188,7 @@ class _LocalError:
 
     def __init__(self, target: np.ndarray, known: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius: int) -> None:
         height, width = known.shape
-        # Nearest known pixel of each pixel to fill (label = one per known pixel; the L2 5x5 approximation).
-        _, labels = cv2.distanceTransformWithLabels((~known).astype(np.uint8), cv2.DIST_L2, 5,
-                                                    labelType=cv2.DIST_LABEL_PIXEL)
-        known_flat = np.flatnonzero(known)
-        pixel_of_label = np.zeros(int(labels.max()) + 1, np.int64)
-        pixel_of_label[labels.reshape(-1)[known_flat]] = known_flat
-        near = pixel_of_label[labels[ys, xs]]
+        near = fallback.nearest_known(~known, ys, xs, mask_size=5)  # the L2 5x5 approximation
         points, self.point_of = _distinct(near, height * width)
         # Each point's (2r+1)^2 window, as indices into the band of distinct known pixels; -1: outside or missing.
         offsets = np.arange(-radius, radius + 1)

@@ -37,10 +37,12 @@ def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4
     return out
 
 
-def nearest_known(missing: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    """Flat index of the nearest known (not missing) pixel of each pixel (ys, xs): exact Euclidean distance
-    (OpenCV's precise distance transform; ties may go either way)."""
-    _, labels = cv2.distanceTransformWithLabels(missing.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE,
+def nearest_known(missing: np.ndarray, ys: np.ndarray, xs: np.ndarray,
+                  mask_size: int = cv2.DIST_MASK_PRECISE) -> np.ndarray:
+    """Flat index of the nearest known (not missing) pixel of each pixel (ys, xs): by exact Euclidean distance
+    (OpenCV's precise distance transform; ties may go either way), or its 3x3/5x5 approximation
+    (``mask_size`` 3 or 5)."""
+    _, labels = cv2.distanceTransformWithLabels(missing.astype(np.uint8), cv2.DIST_L2, mask_size,
                                                 labelType=cv2.DIST_LABEL_PIXEL)
     known = np.flatnonzero(~missing)
     flat_labels = labels.reshape(-1)
