@@ -344,9 +344,10 @@ class _FrameRenderer:
             output, output_valid = stabilized.frame, ~stabilized.missing
         if config.deblur.enabled and config.deblur.radius > 0:
             # Last, on the frame as it will be written: in full mode completion's neighbours are reused (deblurring
-            # warps the sharper ones' colours itself), transferred pixels are resampled once, and completed pixels are sharpened like the rest (measured +0.06 dB over the frame, +5.7 dB
-            # on the completed pixels, against deblurring before completion), so the frame stays full; missing
-            # pixels of --mode none stay missing. Sharpness is compared on the original frames (pipeline/deblur.py).
+            # warps the sharper ones' colours itself), transferred pixels are resampled once, and completed pixels
+            # are sharpened like the rest (measured +0.06 dB over the frame, +5.7 dB on the completed pixels,
+            # against deblurring before completion), so the frame stays full; missing pixels of --mode none stay
+            # missing. Sharpness is compared on the original frames (pipeline/deblur.py).
             deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: frame.rgb},
                                             self.curr_from_prev, self.orig_from_out[t], config.deblur,
                                             warped=warped, cache=self.energy_cache)
