@@ -54,7 +54,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numba import njit
-from scipy.ndimage import distance_transform_edt
 
 from pipeline.mosaic import intensity
 
@@ -315,5 +314,7 @@ def _fill_float(values: np.ndarray, known: np.ndarray) -> np.ndarray:
     """Unknown entries of a grid take the value of the nearest known one."""
     if known.all():
         return values
+    from scipy.ndimage import distance_transform_edt  # here: scipy.ndimage takes ~0.3 s to import, LK alone needs it
+
     _, (iy, ix) = distance_transform_edt(~known, return_indices=True)
     return values[iy, ix]

@@ -11,8 +11,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.optimize import linprog
-
 from pipeline import geometry
 
 
@@ -74,6 +72,8 @@ def largest_crop(orig_from_stab: np.ndarray, width: int, height: int) -> CropWin
     the window's four corners must lie inside all of them and inside the frame. That is a linear
     programme in (x0, y0, scale), maximising scale. None when no area is common to all frames.
     """
+    from scipy.optimize import linprog  # here, not at the top: importing scipy.optimize takes ~0.5 s
+
     corners = geometry.frame_corners(width, height)
     offsets = corners  # window corner j sits at (x0, y0) + scale * corners[j]
     rows: list[np.ndarray] = []

@@ -253,3 +253,12 @@ def test_cli_preset_sets_the_encoders_speed_and_keeps_the_frames_close(shaky, tm
         cli.main(["stabilize", str(path), "-o", str(tmp_path / "x.mp4"), "--preset", "warp9"])
     assert refused.value.code == 2 and "invalid choice: 'warp9'" in capsys.readouterr().err
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_the_stabilize_command_does_not_import_what_only_other_paths_need():
+    """Start-up cost: scipy.optimize (~0.5 s to import, crop mode's linear programme only), scipy.ndimage
+    (~0.3 s, the sparse-LK flow method only) and the recorder/viewer stack stay out of a plain run's import."""
+    probe = ("import sys, ffviz.cli, pipeline.stabilize; "
+             "print(' '.join(m for m in ('scipy.optimize', 'scipy.ndimage', 'rerun', 'matplotlib') if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()
+    assert loaded == []
