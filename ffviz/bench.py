@@ -232,6 +232,10 @@ class BenchRow:
     peak_rss_bytes: int | None = None  # the largest over repeats
     quality: Quality | None = None
     error: str = ""
+    # What the method wrote: its video codec and the file's bitrate (kbit/s over its duration). Encoders cost
+    # very different CPU (the OpenCV sample writes XVID at ~200 kbit/s, the others x264 at CRF 18).
+    codec: str | None = None
+    kbit_s: float | None = None
 
     @property
     def seconds(self) -> float | None:
@@ -274,6 +278,15 @@ def input_row(clip: Path) -> BenchRow:
     return BenchRow(clip.name, "input", info.width, info.height, own.n_frames,
                     quality=Quality(_finite(own.residual_jitter_px), _finite(own.stability_translation),
                                     _finite(own.stability_rotation)))
+
+
+def describe_output(output: Path) -> tuple[str, float | None]:
+    """(video codec, kbit/s of the whole file over its duration) of a written output."""
+    from pipeline.video_io import probe_video
+
+    info = probe_video(output)
+    kbit_s = output.stat().st_size * 8 / 1000 / info.duration_s if info.duration_s > 0 else None
+    return info.codec, kbit_s
 
 
 def measure_quality(clip: Path, output: Path) -> Quality:
@@ -402,6 +415,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             row.peak_rss_bytes = max(row.peak_rss_bytes or 0, run.peak_rss_bytes)
             if row.quality is None and not row.error:
                 try:
+                    row.codec, row.kbit_s = describe_output(output)
                     row.quality = measure_quality(clip, output)
                 except FFVizError as error:  # timing stands; the output cannot be compared
                     row.error = f"quality not measured: {error}"

@@ -21,6 +21,8 @@ COLUMNS: tuple[tuple[str, Callable[[BenchRow], object], str], ...] = (
     ("fps", lambda r: r.fps, "{:.2f}"),
     ("cpu_s", lambda r: r.cpu_seconds, "{:.2f}"),
     ("peak_MiB", lambda r: r.peak_mib, "{:.0f}"),
+    ("codec", lambda r: r.codec, "{}"),
+    ("kbit_s", lambda r: r.kbit_s, "{:.0f}"),
     ("jitter_px", lambda r: r.quality and r.quality.jitter_px, "{:.3f}"),
     ("stab_T", lambda r: r.quality and r.quality.stab_T, "{:.3f}"),
     ("stab_R", lambda r: r.quality and r.quality.stab_R, "{:.3f}"),
@@ -63,7 +65,8 @@ def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
     md.write_text("\n".join([
         HEADER, *map(markdown_line, rows), "",
         f"{seconds_note}; fps = input frames / seconds; cpu_s = user + system seconds; "
-        "peak_MiB = the method's peak RSS (wait4); quality from pipeline.metrics.compare against the input.",
+        "peak_MiB = the method's peak RSS (wait4); codec, kbit_s = what it wrote (file size over duration); "
+        "quality from pipeline.metrics.compare against the input.",
         f"{run.cpus} CPUs; load average {run.load_before[0]:.1f} at the start, {run.load_after[0]:.1f} at the end.",
         *run.notes, "", *targets(rows), ""]))
     with table_csv.open("w", newline="") as f:

@@ -8,6 +8,7 @@ import shutil
 import sys
 from collections import Counter
 
+import av
 import cv2
 import numpy as np
 import pytest
@@ -51,7 +52,7 @@ def test_writes_table_files_and_plot(bench_run):
 
 
 def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
-    _, rows = bench_run
+    out, rows = bench_run
     source = rows["input"]
     assert source["frames"] == 30 and source["fps"] is None and source["jitter_px"] > 3.0
     for mode in ("crop", "none"):
@@ -61,6 +62,11 @@ def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
         assert row["fps"] == pytest.approx(30 / row["seconds"])
         assert 10 < row["peak_MiB"] < 4096
         assert row["jitter_px"] < source["jitter_px"]
+        written = out / "outputs" / f"tiny.mp4.ffviz-{mode}.mp4"
+        with av.open(str(written)) as container:
+            assert container.streams.video[0].codec_context.name == row["codec"] == "h264"
+            seconds = container.duration / av.time_base
+        assert row["kbit_s"] == pytest.approx(written.stat().st_size * 8 / 1000 / seconds, rel=1e-3)
     assert rows["ffviz crop"]["black"] < 0.01
     assert rows["ffviz none"]["black"] > rows["ffviz crop"]["black"] + 0.005  # uncovered borders stay black
 
@@ -74,6 +80,7 @@ def test_installed_peers_get_rows(bench_run):
         assert row["note"] is None, row["note"]
         assert row["fps"] > 0 and 10 < row["peak_MiB"] < 4096
         assert row["jitter_px"] is not None and row["black"] is not None
+        assert row["codec"] == ("mpeg4" if peer == "opencv" else "h264") and row["kbit_s"] > 0
     assert rows["vidstab"]["jitter_px"] < rows["input"]["jitter_px"]
 
 
