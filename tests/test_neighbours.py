@@ -311,56 +311,107 @@ def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bool
     return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
 
+def _boxes(wanted: np.ndarray, margin: int | None) -> list[tuple[tuple[int, int, int, int], list[tuple[int, int, int, int]]]]:
+    return [(_as_tuple(w.box), [_as_tuple(r) for r in w.owned]) for w in completion._work_boxes(wanted, margin)]
+
+
+def _area(box: tuple[int, int, int, int]) -> int:
+    return (box[2] - box[0]) * (box[3] - box[1])
+
+
+def _owned_mask(rects: list[tuple[int, int, int, int]], shape: tuple[int, int]) -> np.ndarray:
+    mask = np.zeros(shape, bool)
+    for y0, x0, y1, x1 in rects:
+        mask[y0:y1, x0:x1] = True
+    return mask
+
+
 def test_work_boxes_around_two_far_clusters():
     shape, margin = (200, 300), 20
     wanted = np.zeros(shape, bool)
     clusters = [(slice(5, 11), slice(30, 37)), (slice(150, 156), slice(250, 259))]  # the first near the top edge
     for cluster in clusters:
         wanted[cluster] = True
-    boxes = [_as_tuple(b) for b in completion._work_boxes(wanted, margin)]
-    assert sorted(boxes) == sorted(_grown(*c, margin, shape) for c in clusters)
-    assert boxes[0][0] == 0 or boxes[1][0] == 0  # clipped to the frame
+    boxes = sorted(_boxes(wanted, margin))
+    assert [box for box, _ in boxes] == sorted(_grown(*c, margin, shape) for c in clusters)
+    for (_, owned), cluster in zip(boxes, sorted(clusters, key=lambda c: (c[0].start, c[1].start))):
+        alone = np.zeros(shape, bool)
+        alone[cluster] = True
+        assert (_owned_mask(owned, shape) == alone).all()  # each box owns its cluster's pixels, no others
+    assert boxes[0][0][0] == 0  # clipped to the frame
 
 
-def test_work_boxes_merge_clusters_closer_than_twice_the_margin():
+def test_work_boxes_merge_only_where_one_box_costs_no_more_than_two():
     shape, margin = (200, 300), 20
     wanted = np.zeros(shape, bool)
-    a, b = (slice(50, 60), slice(50, 60)), (slice(60, 70), slice(60 + 2 * margin - 5, 100))  # 35 px apart in x
+    a, b = (slice(50, 58), slice(50, 58)), (slice(52, 60), slice(66, 74))  # 8 px apart: grown boxes overlap mostly
     wanted[a] = wanted[b] = True
-    (box,) = [_as_tuple(x) for x in completion._work_boxes(wanted, margin)]
-    assert _contains(box, _grown(*a, margin, shape)) and _contains(box, _grown(*b, margin, shape))
-    assert box == (30, 30, 90, 120)  # the union of the two grown boxes, no more
-    # Exactly 2 * margin apart: the grown boxes only touch and stay apart.
+    (only,) = _boxes(wanted, margin)
+    assert only[0] == (30, 30, 80, 94) and _owned_mask(only[1], shape)[wanted].all()
+    # Farther apart, the joint box would cost more than the two grown ones: they stay two, even overlapping.
     wanted = np.zeros(shape, bool)
-    wanted[a] = True
-    wanted[50:60, 60 + 2 * margin:70 + 2 * margin] = True
-    assert len(completion._work_boxes(wanted, margin)) == 2
+    wanted[50:60, 50:60] = wanted[60:70, 95:100] = True
+    (first, _), (second, _) = _boxes(wanted, margin)
+    assert _overlap(first, second)
+    assert {first, second} == {_grown(slice(50, 60), slice(50, 60), margin, shape),
+                               _grown(slice(60, 70), slice(95, 100), margin, shape)}
 
 
-def test_work_boxes_never_overlap_and_cover_every_pixel_with_its_margin():
+def test_work_boxes_keep_strips_on_two_sides_apart():
+    """A border missing on the left and on the right, joined along the top: one cluster, whose single box was
+    the whole frame; the flows now cover three strips, about three quarters of it."""
+    shape, margin = (360, 640), 96
+    wanted = np.zeros(shape, bool)
+    wanted[:, :30] = wanted[:, -40:] = wanted[:6, :] = True
+    boxes = _boxes(wanted, margin)
+    assert len(boxes) == 3
+    assert sum(_area(box) for box, _ in boxes) < 0.8 * shape[0] * shape[1]
+
+
+def test_work_boxes_own_every_pixel_once_with_its_margin():
     rng = np.random.default_rng(6)
     shape = (180, 320)
     for trial in range(20):
         wanted = np.zeros(shape, bool)
         for _ in range(rng.integers(1, 12)):
             y, x = rng.integers(0, shape[0]), rng.integers(0, shape[1])
-            h, w = rng.integers(1, 15, 2)
+            h, w = rng.integers(1, 60, 2)
             wanted[y:y + h, x:x + w] = True
         margin = int(rng.integers(0, 40))
-        boxes = [_as_tuple(b) for b in completion._work_boxes(wanted, margin)]
-        for i in range(len(boxes)):
+        boxes = _boxes(wanted, margin)
+        owned = np.zeros(shape, np.int64)
+        for box, rects in boxes:
+            for rect in rects:
+                assert _contains(box, _grown(slice(rect[0], rect[2]), slice(rect[1], rect[3]), margin, shape))
+                owned[rect[0]:rect[2], rect[1]:rect[3]] += 1
+        assert owned.max() <= 1, trial  # owned rectangles never overlap
+        assert (owned[wanted] == 1).all(), trial  # and every pixel needing a flow has exactly one owner
+        for i in range(len(boxes)):  # the greedy merge leaves no pair that one joint box would cover cheaper
             for j in range(i + 1, len(boxes)):
-                assert not _overlap(boxes[i], boxes[j]), (trial, boxes[i], boxes[j])
-        for y, x in zip(*np.nonzero(wanted)):
-            around = _grown(slice(y, y + 1), slice(x, x + 1), margin, shape)
-            assert sum(_contains(box, around) for box in boxes) == 1, (trial, y, x)
+                (a, _), (b, _) = boxes[i], boxes[j]
+                joint = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+                assert _area(joint) > _area(a) + _area(b), (trial, a, b)
+
+
+def test_a_pixel_takes_the_flow_of_the_box_that_owns_it_where_boxes_overlap():
+    from types import SimpleNamespace
+
+    first = SimpleNamespace(box=(slice(0, 50), slice(0, 60)), owned=((slice(0, 20), slice(0, 30)),))
+    second = SimpleNamespace(box=(slice(10, 80), slice(20, 100)), owned=((slice(40, 60), slice(50, 90)),))
+    ys = np.array([5, 15, 45, 45, 70, 90])
+    xs = np.array([5, 25, 55, 10, 95, 5])
+    # Owned by the first though inside the second's box too; owned by the second; only in the first's box;
+    # only in the second's; in none.
+    assert completion._owners([first, second], ys, xs).tolist() == [0, 0, 1, 0, 1, -1]
 
 
 def test_work_boxes_without_a_margin_are_the_whole_frame():
     wanted = np.zeros((90, 160), bool)
     wanted[3, 4] = True
-    assert completion._work_boxes(wanted, None) == [(slice(0, 90), slice(0, 160))]
+    whole = (slice(0, 90), slice(0, 160))
+    assert [(w.box, w.owned) for w in completion._work_boxes(wanted, None)] == [(whole, (whole,))]
     assert completion._work_boxes(np.zeros((90, 160), bool), 10) == []
+    assert completion._work_boxes(np.zeros((90, 160), bool), None) == []
 
 
 # --- completion._LocalError -------------------------------------------------------------------------------------

@@ -200,10 +200,12 @@ def test_fast_marching_band_advances_in_the_pipelines_visiting_order(full_run):
         pictures = [recording.image(entity, s, ent.FMM_STEP_TIMELINE) for s in range(steps + 1)]
         to_fill = order >= 0
         final = pictures[-1][to_fill]
+        thresholds = trace.fmm_thresholds(n_filled)  # even shares of the order (rounded as linspace does)
+        assert np.abs(thresholds - np.arange(steps + 1) * n_filled / steps).max() <= 0.5 + 1e-9
         for step, picture in enumerate(pictures):
             # Exactly the pixels Fast Marching visited before this step's share of the order show their final
             # colour; the rest show the "to fill" colour or the band.
-            threshold = round(step * n_filled / steps)
+            threshold = thresholds[step]
             shown = (picture[to_fill] == final).all(axis=-1)
             np.testing.assert_array_equal(shown, order[to_fill] < threshold, err_msg=f"frame {t} step {step}")
             band = (picture == trace.BAND_RGB).all(axis=-1) & to_fill
