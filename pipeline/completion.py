@@ -132,7 +132,7 @@ class NeighbourFill:
     pieces: list[FlowPiece]
     shape: tuple[int, int]
     filled: np.ndarray  # bool: pixels this neighbour's local warp filled
-    reached: np.ndarray | None = None  # bool: missing pixels its local warp had a sample for
+    reached: np.ndarray | None = None  # bool: pixels needing a local warp that its local warp had a sample for
 
     @cached_property
     def _full_frame_views(self) -> tuple[local_flow.LocalFlowResult, fmm.MotionInpaintResult]:
@@ -189,7 +189,7 @@ class CompletionResult:
 
 @dataclass
 class _Candidate:
-    """One neighbour's local warp, sampled at the pixels to fill (vectors over those pixels)."""
+    """One neighbour's local warp, sampled at the pixels that need one (vectors over those pixels)."""
 
     colours: np.ndarray  # (m, 3) uint8: I_t'(p + F(p))
     reached: np.ndarray  # (m,) bool: the warp landed on neighbour content
@@ -302,13 +302,16 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
             fills, candidates = _local_warps(target, known, missing, neighbours, order, errors, ys, xs, wanted,
                                              at_missing, local_error, config, target_original)
         if fills:
+            # Candidates are over the wanted pixels only (``needing``: their indices among the missing ones).
+            needing = np.flatnonzero(wanted)
             chosen = _best_candidate(candidates)
-            take = wanted & (chosen >= 0)
-            take &= ~checked | _moving_and_better(candidates, chosen, static_error, config)
-            pick = np.flatnonzero(take)
-            which = chosen[pick]
+            take = chosen >= 0
+            take &= ~checked[needing] | _moving_and_better(candidates, chosen, static_error[needing], config)
+            among = np.flatnonzero(take)
+            which = chosen[among]
+            pick = needing[among]
             py, px = ys[pick], xs[pick]
-            frame[py, px] = np.stack([c.colours for c in candidates])[which, pick]
+            frame[py, px] = np.stack([c.colours for c in candidates])[which, among]
             source[py, px] = SOURCE_LOCAL_WARP
             corrected[py, px] = accepted[pick]
             remaining[py, px] = False
@@ -379,9 +382,13 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     works = _work_boxes(wanted, None if config.flow_margin_px is None else round(config.flow_margin_px / scale))
     views = [_BoxView.of(work.box, target, known, rescue_focus, near_missing, scale, target_original)
              for work in works]
-    points_y = np.concatenate([ys, local_error.band_y])
-    points_x = np.concatenate([xs, local_error.band_x])
-    m = len(ys)
+    # The local warp is sampled only at the pixels that need it (the mosaic filled the others) and on the local
+    # error's band.
+    needing = np.flatnonzero(want)
+    points_y = np.concatenate([ys[needing], local_error.band_y])
+    points_x = np.concatenate([xs[needing], local_error.band_x])
+    m = len(needing)
+    at_needing = [(colours[needing], valid[needing]) for colours, valid in at_missing]
     fills: list[NeighbourFill] = []
     candidates: list[_Candidate] = []
     for i in order:
@@ -396,12 +403,12 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
         colours, landed, motion = _local_warp(fill.inpainted_flow_at(points_y, points_x), neighbour, points_y,
                                               points_x)
         # A warp whose surroundings cannot be checked ranks after every checked one.
-        error = np.nan_to_num(local_error(colours[m:], landed[m:]), nan=255.0)
+        error = np.nan_to_num(local_error(colours[m:], landed[m:])[needing], nan=255.0)
         sample, moving = colours[:m], motion[:m] > config.moving_px
-        confirmed = moving | _seen_by_another(sample, i, at_missing, config.confirm_difference)
+        confirmed = moving | _seen_by_another(sample, i, at_needing, config.confirm_difference)
         candidates.append(_Candidate(sample, landed[:m], motion[:m], error, confirmed))
         fill.reached = np.zeros((height, width), bool)
-        fill.reached[ys, xs] = landed[:m]
+        fill.reached[ys[needing], xs[needing]] = landed[:m]
         fills.append(fill)
     return fills, candidates
 
