@@ -370,8 +370,8 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     """Steps 2-4 for the nearest ``max_warp_neighbours`` neighbours: local flow, motion inpainting, local warp.
 
     ``want``: which of the pixels to fill (ys, xs) need it. Flow and motion inpainting run inside boxes around
-    them only (``_work_boxes``), at the flow's working resolution; the local warp is sampled at the pixels to
-    fill and on the local error's band.
+    them only (``_work_boxes``), at the flow's working resolution; the local warp is sampled at those pixels and
+    on the local error's band. The candidates returned are over the ``want`` pixels only.
     """
     height, width = missing.shape
     scale = flow_scale((height, width), config)
@@ -382,8 +382,7 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     works = _work_boxes(wanted, None if config.flow_margin_px is None else round(config.flow_margin_px / scale))
     views = [_BoxView.of(work.box, target, known, rescue_focus, near_missing, scale, target_original)
              for work in works]
-    # The local warp is sampled only at the pixels that need it (the mosaic filled the others) and on the local
-    # error's band.
+    # The mosaic filled the other missing pixels: the local warp is not sampled there.
     needing = np.flatnonzero(want)
     points_y = np.concatenate([ys[needing], local_error.band_y])
     points_x = np.concatenate([xs[needing], local_error.band_x])
