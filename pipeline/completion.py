@@ -162,15 +162,19 @@ def _inside(box: tuple[slice, slice], ys: np.ndarray, xs: np.ndarray) -> np.ndar
     return (ys >= rows.start) & (ys < rows.stop) & (xs >= cols.start) & (xs < cols.stop)
 
 
+def _claims(pieces: Sequence[FlowPiece]) -> list[tuple[int, tuple[slice, slice]]]:
+    """(piece index, rectangle) in the order they claim pixels, a later claim winning: every box, then each
+    piece's owned rectangles. So a pixel takes the flow of the piece owning it, else of the last box holding
+    it (a pixel near, not among, the ones that needed the flow, e.g. on the local error's band)."""
+    return ([(k, piece.box) for k, piece in enumerate(pieces)]
+            + [(k, rect) for k, piece in enumerate(pieces) for rect in piece.owned])
+
+
 def _owners(pieces: Sequence[FlowPiece], ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    """Per pixel, the index of the piece whose flow it takes: the one owning it, else the last box holding it
-    (a pixel near, not among, the ones that needed the flow, e.g. on the local error's band); -1: none."""
+    """Per pixel, the index of the piece whose flow it takes (``_claims``); -1: none."""
     owner = np.full(len(ys), -1, np.int64)
-    for k, piece in enumerate(pieces):
-        owner[_inside(piece.box, ys, xs)] = k
-    for k, piece in enumerate(pieces):
-        for rect in piece.owned:
-            owner[_inside(rect, ys, xs)] = k
+    for k, rect in _claims(pieces):
+        owner[_inside(rect, ys, xs)] = k
     return owner
 
 
@@ -296,14 +300,13 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
             covered = ~np.isnan(per_neighbour).all(axis=0)  # no neighbour sees the surroundings: no evidence
             static_error[np.flatnonzero(accepted)[covered]] = np.nanmedian(per_neighbour[:, covered], axis=0)
         checked = accepted & (static_error > config.mosaic_check_margin)
-        wanted = remaining[ys, xs] | checked
-        if wanted.any():
+        needing = np.flatnonzero(remaining[ys, xs] | checked)  # indices (into ys, xs) of the pixels to warp
+        if len(needing):
             order, errors = _priority(target, known, neighbours, config.max_warp_neighbours)
-            fills, candidates = _local_warps(target, known, missing, neighbours, order, errors, ys, xs, wanted,
+            fills, candidates = _local_warps(target, known, missing, neighbours, order, errors, ys, xs, needing,
                                              at_missing, local_error, config, target_original)
         if fills:
-            # Candidates are over the wanted pixels only (``needing``: their indices among the missing ones).
-            needing = np.flatnonzero(wanted)
+            # Candidates are over the ``needing`` pixels only.
             chosen = _best_candidate(candidates)
             take = chosen >= 0
             take &= ~checked[needing] | _moving_and_better(candidates, chosen, static_error[needing], config)
@@ -364,26 +367,25 @@ def _priority(target: np.ndarray, known: np.ndarray, neighbours: Sequence[Warped
 
 
 def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
-                 order: list[int], errors: list[float], ys: np.ndarray, xs: np.ndarray, want: np.ndarray,
+                 order: list[int], errors: list[float], ys: np.ndarray, xs: np.ndarray, needing: np.ndarray,
                  at_missing: list[tuple[np.ndarray, np.ndarray]], local_error: _LocalError, config: CompletionConfig,
                  target_original: WarpedNeighbour | None = None) -> tuple[list[NeighbourFill], list[_Candidate]]:
     """Steps 2-4 for the nearest ``max_warp_neighbours`` neighbours: local flow, motion inpainting, local warp.
 
-    ``want``: which of the pixels to fill (ys, xs) need it. Flow and motion inpainting run inside boxes around
-    them only (``_work_boxes``), at the flow's working resolution; the local warp is sampled at those pixels and
-    on the local error's band. The candidates returned are over the ``want`` pixels only.
+    ``needing``: indices of the pixels to fill (ys, xs) that need it. Flow and motion inpainting run inside boxes
+    around them only (``_work_boxes``), at the flow's working resolution; the local warp is sampled at those
+    pixels and on the local error's band (the mosaic filled the others). The candidates returned are over the
+    ``needing`` pixels only.
     """
     height, width = missing.shape
     scale = flow_scale((height, width), config)
     near_missing = _dilate(missing, round(NEAR_MISSING_PX / scale))
     rescue_focus = _dilate(missing, round(RESCUE_NEAR_MISSING_PX / scale))
     wanted = np.zeros((height, width), bool)
-    wanted[ys[want], xs[want]] = True
+    wanted[ys[needing], xs[needing]] = True
     works = _work_boxes(wanted, None if config.flow_margin_px is None else round(config.flow_margin_px / scale))
     views = [_BoxView.of(work.box, target, known, rescue_focus, near_missing, scale, target_original)
              for work in works]
-    # The mosaic filled the other missing pixels: the local warp is not sampled there.
-    needing = np.flatnonzero(want)
     points_y = np.concatenate([ys[needing], local_error.band_y])
     points_x = np.concatenate([xs[needing], local_error.band_x])
     m = len(needing)
@@ -440,7 +442,7 @@ class _BoxView:
 
 
 def _flow_in_box(view: _BoxView, neighbour_rgb: np.ndarray, neighbour_valid: np.ndarray,
-                 config: CompletionConfig, owned: tuple[tuple[slice, slice], ...] = ()) -> FlowPiece:
+                 config: CompletionConfig, owned: tuple[tuple[slice, slice], ...]) -> FlowPiece:
     """Local flow and its motion inpainting in one box, from the neighbour's crop of it at the box view's
     working resolution."""
     flow = local_flow.local_flow(view.target, view.known, neighbour_rgb, neighbour_valid, config.flow,
@@ -518,45 +520,35 @@ def _work_boxes(wanted: np.ndarray, margin: int | None, max_cells: int = 16) -> 
 def _full_frame(pieces: list[FlowPiece], shape: tuple[int, int],
                 ) -> tuple[local_flow.LocalFlowResult, fmm.MotionInpaintResult]:
     """Flow pieces as full-frame, full-resolution arrays (no flow outside them). Where boxes overlap, each
-    pixel shows the piece whose flow it takes (``_owners``)."""
-    def regions(piece: FlowPiece) -> list[tuple[slice, slice]]:
-        return [piece.box]
-
-    def owned(piece: FlowPiece) -> list[tuple[slice, slice]]:
-        return list(piece.owned)
+    pixel shows the piece whose flow it takes (``_claims``)."""
+    owner = np.full(shape, -1, np.int64)
+    for k, (rows, cols) in _claims(pieces):
+        owner[rows, cols] = k
+    mine = [owner[piece.box] == k for k, piece in enumerate(pieces)]  # within each box, the pixels it shows
 
     def paste(values: list[np.ndarray], fill: float | bool) -> np.ndarray:
         """Per-pixel values (masks, order, arrival): nearest coarse pixel."""
         out = np.full(shape, fill, values[0].dtype)
-        resized = []
-        for piece, value in zip(pieces, values):
+        for piece, value, shown in zip(pieces, values, mine):
             rows, cols = piece.box
             size = (cols.stop - cols.start, rows.stop - rows.start)
             if value.shape != (size[1], size[0]):
                 value = cv2.resize(value.view(np.uint8) if value.dtype == bool else value, size,
                                    interpolation=cv2.INTER_NEAREST).view(value.dtype)
-            resized.append(value)
-        for which in (regions, owned):  # boxes first, then each piece's own pixels over any overlap
-            for piece, value in zip(pieces, resized):
-                for rows, cols in which(piece):
-                    out[rows, cols] = value[rows.start - piece.box[0].start:rows.stop - piece.box[0].start,
-                                            cols.start - piece.box[1].start:cols.stop - piece.box[1].start]
+            out[rows, cols][shown] = value[shown]
         return out
 
     def paste_flow(inpainted: bool) -> np.ndarray:
         out = np.full(shape + (2,), np.nan if inpainted else 0.0, np.float32)
-        for which in (regions, owned):
-            for piece in pieces:
-                for rows, cols in which(piece):
-                    if inpainted:
-                        ys, xs = np.mgrid[rows, cols]
-                        out[rows, cols] = piece.inpainted_flow_at(ys.ravel(), xs.ravel()).reshape(ys.shape + (2,))
-                    else:
-                        box_rows, box_cols = piece.box
-                        size = (box_cols.stop - box_cols.start, box_rows.stop - box_rows.start)
-                        flow = cv2.resize(piece.flow.flow, size, interpolation=cv2.INTER_LINEAR) / piece.scale
-                        out[rows, cols] = flow[rows.start - box_rows.start:rows.stop - box_rows.start,
-                                               cols.start - box_cols.start:cols.stop - box_cols.start]
+        for piece, shown in zip(pieces, mine):
+            rows, cols = piece.box
+            if inpainted:
+                ys, xs = np.mgrid[rows, cols]
+                out[rows, cols][shown] = piece.inpainted_flow_at(ys[shown], xs[shown])
+            else:
+                size = (cols.stop - cols.start, rows.stop - rows.start)
+                flow = cv2.resize(piece.flow.flow, size, interpolation=cv2.INTER_LINEAR) / piece.scale
+                out[rows, cols][shown] = flow[shown]
         return out
 
     flows = [piece.flow for piece in pieces]
