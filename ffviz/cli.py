@@ -115,7 +115,7 @@ def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None 
                    help="x264 speed against file size at the same --crf quality: faster presets encode sooner into "
                         "larger files (default: %(default)s)")
     p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
-                   help="frames processed at once, on threads (default: one per CPU core); the output is the same")
+                   help="frames processed at once, on threads (default: one per CPU core); the frames written are the same")
 
 
 MAX_RADIUS = 100_000  # frames; the smoothing kernel is allocated at 2k+1 taps

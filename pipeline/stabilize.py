@@ -166,7 +166,7 @@ def stabilize(input_path: Path | str, output_path: Path | str | None, config: St
     """Stabilize ``input_path`` into ``output_path`` (None: run and observe, write nothing).
 
     ``crf``, ``preset``: x264's quality and speed/size trade-off for the output. ``workers``: frames rendered at
-    once on threads (None: one per CPU core); the output is the same."""
+    once on threads (None: one per CPU core); the frames written are the same."""
     input_path = Path(input_path)
     output_path = Path(output_path) if output_path is not None else None
     source = FileSource(input_path)
