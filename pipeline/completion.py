@@ -48,7 +48,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from pipeline import fallback, fmm, local_flow, mosaic
+from pipeline import fallback, fmm, geometry, local_flow, mosaic
 from pipeline.neighbours import WarpedNeighbour, shrink, shrink_all, shrink_any
 
 # What filled each pixel (CompletionResult.source).
@@ -213,17 +213,7 @@ class _LocalError:
     def __init__(self, target: np.ndarray, known: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius: int) -> None:
         height, width = known.shape
         near = fallback.nearest_known(~known, ys, xs, mask_size=5)  # the L2 5x5 approximation
-        points, self.point_of = _distinct(near, height * width)
-        # Each point's (2r+1)^2 window, as indices into the band of distinct known pixels; -1: outside or missing.
-        offsets = np.arange(-radius, radius + 1)
-        window_y = (points // width)[:, None] + np.repeat(offsets, len(offsets))[None]
-        window_x = (points % width)[:, None] + np.tile(offsets, len(offsets))[None]
-        inside = (window_y >= 0) & (window_y < height) & (window_x >= 0) & (window_x < width)
-        flat = np.where(inside, window_y * width + window_x, 0)
-        usable = inside & known.reshape(-1)[flat]
-        band, index = _distinct(flat[usable], height * width)
-        self.window = np.full(flat.shape, -1, np.int64)
-        self.window[usable] = index
+        self.point_of, self.window, band = _windows(np.ascontiguousarray(known), near, radius)
         self.band_y, self.band_x = band // width, band % width
         self.target = mosaic.intensity(target[self.band_y, self.band_x])
 
@@ -236,14 +226,51 @@ class _LocalError:
         return per_point[self.point_of]
 
 
-def _distinct(flat_indices: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """np.unique(flat_indices, return_inverse=True) for indices into an array of ``size``: by marking, not sorting."""
-    seen = np.zeros(size, bool)
-    seen[flat_indices] = True
-    distinct = np.flatnonzero(seen)
-    position = np.empty(size, np.int64)
-    position[distinct] = np.arange(len(distinct))
-    return distinct, position[flat_indices]
+def _nan_median_columns(values: np.ndarray) -> np.ndarray:
+    """np.nanmedian(values, axis=0) for float columns with at least one number each: the same values, ~4x
+    faster (numpy's NaN-aware median goes through masked arrays)."""
+    ordered = np.sort(values, axis=0)  # NaN last
+    count = np.count_nonzero(~np.isnan(values), axis=0)
+    columns = np.arange(values.shape[1])
+    return (ordered[(count - 1) // 2, columns] + ordered[count // 2, columns]) / values.dtype.type(2)
+
+
+@njit(cache=True, nogil=True)
+def _windows(known: np.ndarray, near: np.ndarray, radius: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The local error's bookkeeping, from each pixel's nearest known pixel (flat ``near``):
+    ``point_of`` (m,), the row of each pixel's window (pixels sharing a nearest known pixel share one);
+    ``window`` (points, (2r+1)^2), indices into the band, -1 where the offset is outside the frame or missing;
+    ``band``, the flat indices of the known pixels the windows hold, each once, in first-seen order."""
+    height, width = known.shape
+    side = 2 * radius + 1
+    index = np.full(height * width, -1, np.int32)  # per pixel: its point, then its place in the band
+    point_of = np.empty(len(near), np.int64)
+    points = np.empty(len(near), np.int64)
+    n_points = 0
+    for i in range(len(near)):
+        if index[near[i]] < 0:
+            index[near[i]] = n_points
+            points[n_points] = near[i]
+            n_points += 1
+        point_of[i] = index[near[i]]
+    for p in range(n_points):
+        index[points[p]] = -1
+    window = np.full((n_points, side * side), -1, np.int64)
+    band = np.empty(n_points * side * side, np.int64)
+    n_band = 0
+    for p in range(n_points):
+        y, x = points[p] // width, points[p] % width
+        for k in range(side * side):
+            wy, wx = y + k // side - radius, x + k % side - radius
+            if wy < 0 or wy >= height or wx < 0 or wx >= width or not known[wy, wx]:
+                continue
+            flat = wy * width + wx
+            if index[flat] < 0:
+                index[flat] = n_band
+                band[n_band] = flat
+                n_band += 1
+            window[p, k] = index[flat]
+    return point_of, window, band[:n_band].copy()
 
 
 @njit(cache=True, nogil=True)
@@ -274,7 +301,7 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
     height, width = missing.shape
     source = np.where(missing, SOURCE_FALLBACK, SOURCE_ORIGINAL).astype(np.uint8)
     filled_by = np.zeros((height, width), np.int16)
-    ys, xs = np.nonzero(missing)  # the pixels to fill
+    ys, xs = geometry.mask_pixels(missing)  # the pixels to fill
     # Each neighbour is looked at only where needed (pipeline/neighbours.py): first at the missing pixels.
     at_missing = [n.at(ys, xs) for n in neighbours]
     mosaic_result = mosaic.mosaic_from_samples(
@@ -298,7 +325,7 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
             per_neighbour = np.stack([local_error(*n.at(local_error.band_y, local_error.band_x))[accepted]
                                       for n in neighbours])
             covered = ~np.isnan(per_neighbour).all(axis=0)  # no neighbour sees the surroundings: no evidence
-            static_error[np.flatnonzero(accepted)[covered]] = np.nanmedian(per_neighbour[:, covered], axis=0)
+            static_error[np.flatnonzero(accepted)[covered]] = _nan_median_columns(per_neighbour[:, covered])
         checked = accepted & (static_error > config.mosaic_check_margin)
         needing = np.flatnonzero(remaining[ys, xs] | checked)  # indices (into ys, xs) of the pixels to warp
         if len(needing):

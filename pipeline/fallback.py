@@ -11,6 +11,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from pipeline import geometry
+
 
 def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4.0) -> np.ndarray:
     """``image`` with ``missing`` pixels replaced by a smooth extension of the known ones."""
@@ -18,7 +20,7 @@ def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4
         return image.copy()
     if missing.all():
         return np.zeros_like(image)
-    ys, xs = np.nonzero(missing)
+    ys, xs = geometry.mask_pixels(missing)
     pad = int(3 * blur_sigma) + 2
     y0, y1 = max(ys.min() - pad, 0), min(ys.max() + pad + 1, missing.shape[0])
     x0, x1 = max(xs.min() - pad, 0), min(xs.max() + pad + 1, missing.shape[1])
@@ -27,7 +29,7 @@ def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4
     if box_missing.all():  # the hole fills its whole neighbourhood: look at the full frame instead
         box_missing, box, (y0, x0) = missing, image, (0, 0)
     extended = box.astype(np.float32)
-    hole_y, hole_x = np.nonzero(box_missing)
+    hole_y, hole_x = geometry.mask_pixels(box_missing)
     near = nearest_known(box_missing, hole_y, hole_x)
     extended[hole_y, hole_x] = extended.reshape(-1, *box.shape[2:])[near]
     smoothed = cv2.GaussianBlur(extended, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)

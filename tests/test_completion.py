@@ -161,3 +161,17 @@ def test_flow_at_reduced_resolution_from_the_downscaled_copies_matches_shrinking
     assert from_copies.pixels == shrunk.pixels > 20_000
     assert abs(from_copies.psnr("ours") - shrunk.psnr("ours")) < 0.5, (vars(from_copies), vars(shrunk))
     assert from_copies.psnr("ours") > from_copies.psnr("mosaic+telea")
+
+
+def test_nan_median_columns_equals_numpy_nanmedian():
+    """The static scene's error per pixel is the median over the neighbours that see its surroundings."""
+    rng = np.random.default_rng(5)
+    values = (rng.random((12, 5000)) * 60).astype(np.float32)
+    values[rng.random(values.shape) < 0.4] = np.nan
+    values[:11, 0] = np.nan  # one number
+    values[:10, 1] = np.nan  # two: the mean of both
+    values[:, 2] = np.arange(12)  # even count, no NaN
+    values = values[:, ~np.isnan(values).all(axis=0)]
+    result = completion._nan_median_columns(values)
+    assert result.dtype == np.float32
+    np.testing.assert_array_equal(result, np.nanmedian(values, axis=0))

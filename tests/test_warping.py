@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.warping import largest_crop, warp_frame
+from pipeline.warping import blacken, largest_crop, warp_frame
 
 W, H = 160, 90
 
@@ -67,3 +67,32 @@ def test_crop_of_rotated_frames_is_valid_everywhere():
 def test_no_common_area_gives_none():
     transforms = np.array([translation(W, 0), translation(-W, 0)])
     assert largest_crop(transforms, W, H) is None
+
+
+def test_blacken_matches_boolean_assignment_on_frames_views_and_pixel_lists():
+    rng = np.random.default_rng(2)
+    frame = rng.integers(0, 256, (37, 51, 3), dtype=np.uint8)
+    mask = rng.random((37, 51)) < 0.3
+    expected = frame.copy()
+    expected[mask] = 0
+    result = frame.copy()
+    assert blacken(result, mask) is result
+    np.testing.assert_array_equal(result, expected)
+    # a crop (rows not contiguous) is written in place, the rest of the frame untouched
+    whole = frame.copy()
+    blacken(whole[5:25, 10:40], mask[5:25, 10:40])
+    expected = frame.copy()
+    expected[5:25, 10:40][mask[5:25, 10:40]] = 0
+    np.testing.assert_array_equal(whole, expected)
+    # a list of pixels, contiguous or not
+    for pixels in (frame.reshape(-1, 3)[:500].copy(), frame.reshape(-1, 3)[:1000:2]):
+        flags = mask.reshape(-1)[:500]
+        expected = pixels.copy()
+        expected[flags] = 0
+        blacken(pixels, flags)
+        np.testing.assert_array_equal(pixels, expected)
+    tiny = frame[:1, :1].copy()  # one pixel: OpenCV would read it as 1x3
+    blacken(tiny, np.ones((1, 1), bool))
+    assert not tiny.any()
+    with pytest.raises(ValueError):
+        blacken(frame.astype(np.float32), mask)
