@@ -406,8 +406,8 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     """
     height, width = missing.shape
     scale = flow_scale((height, width), config)
-    near_missing = _dilate(missing, round(NEAR_MISSING_PX / scale))
-    rescue_focus = _dilate(missing, round(RESCUE_NEAR_MISSING_PX / scale))
+    near_missing, rescue_focus = _dilate(missing, round(NEAR_MISSING_PX / scale),
+                                         round(RESCUE_NEAR_MISSING_PX / scale))
     wanted = np.zeros((height, width), bool)
     wanted[ys[needing], xs[needing]] = True
     works = _work_boxes(wanted, None if config.flow_margin_px is None else round(config.flow_margin_px / scale))
@@ -592,8 +592,20 @@ def _full_frame(pieces: list[FlowPiece], shape: tuple[int, int],
                                     paste([r.filled for r in inpainted], False)))
 
 
-def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
-    return cv2.dilate(mask.astype(np.uint8), np.ones((2 * radius + 1,) * 2, np.uint8)) > 0
+def _dilate(mask: np.ndarray, *radii: int) -> list[np.ndarray]:
+    """``mask`` dilated by the square of each radius (increasing). A square is a row then a column, and each
+    dilation grows the one before: 2x faster than a square kernel per radius at 1080p, the same masks."""
+    grown, done, out = mask.astype(np.uint8), 0, []
+    for radius in radii:
+        step = radius - done
+        if step < 0:
+            raise ValueError(f"radii must increase, got {radii}")
+        if step:
+            grown = cv2.dilate(grown, np.ones((1, 2 * step + 1), np.uint8))
+            grown = cv2.dilate(grown, np.ones((2 * step + 1, 1), np.uint8))
+        done = radius
+        out.append(grown.astype(bool))
+    return out
 
 
 def _seen_by_another(sample: np.ndarray, source: int, at_missing: list[tuple[np.ndarray, np.ndarray]],

@@ -15,28 +15,50 @@ from pipeline import geometry
 
 
 def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4.0) -> np.ndarray:
-    """``image`` with ``missing`` pixels replaced by a smooth extension of the known ones."""
+    """``image`` with ``missing`` pixels replaced by a smooth extension of the known ones.
+
+    Each group of nearby missing pixels is filled in a box around it (grown by the blur's reach), so a hole's
+    fill does not depend on holes elsewhere in the frame, and a few stray pixels in opposite corners of a
+    1080p frame cost two small boxes rather than the frame."""
     if not missing.any():
         return image.copy()
     if missing.all():
         return np.zeros_like(image)
-    ys, xs = geometry.mask_pixels(missing)
     pad = int(3 * blur_sigma) + 2
-    y0, y1 = max(ys.min() - pad, 0), min(ys.max() + pad + 1, missing.shape[0])
-    x0, x1 = max(xs.min() - pad, 0), min(xs.max() + pad + 1, missing.shape[1])
-    box_missing = missing[y0:y1, x0:x1]
-    box = image[y0:y1, x0:x1]
-    if box_missing.all():  # the hole fills its whole neighbourhood: look at the full frame instead
-        box_missing, box, (y0, x0) = missing, image, (0, 0)
+    out = image.copy()
+    ys, xs = geometry.mask_pixels(missing)
+    for group_y, group_x in _groups(ys, xs, missing.shape, pad):
+        y0, y1 = max(group_y.min() - pad, 0), min(group_y.max() + pad + 1, missing.shape[0])
+        x0, x1 = max(group_x.min() - pad, 0), min(group_x.max() + pad + 1, missing.shape[1])
+        box = (slice(y0, y1), slice(x0, x1))
+        if missing[box].all():  # the hole fills its whole neighbourhood: look at the full frame instead
+            box = (slice(0, missing.shape[0]), slice(0, missing.shape[1]))
+        filled = _fill_box(image[box], missing[box], blur_sigma)
+        out[group_y, group_x] = filled[group_y - box[0].start, group_x - box[1].start]
+    return out
+
+
+def _groups(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, int], gap: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The pixels (ys, xs) in groups: cells of ``gap`` pixels holding some, joined when fewer than three empty
+    cells apart (so pixels of different groups are more than 2 * gap apart)."""
+    cell_y, cell_x = ys // gap, xs // gap
+    occupied = np.zeros((shape[0] // gap + 1, shape[1] // gap + 1), np.uint8)
+    occupied[cell_y, cell_x] = 1
+    count, labels = cv2.connectedComponents(cv2.dilate(occupied, np.ones((3, 3), np.uint8)), connectivity=8)
+    label = labels[cell_y, cell_x]
+    order = np.argsort(label, kind="stable")
+    splits = np.flatnonzero(np.diff(label[order])) + 1
+    return [(ys[part], xs[part]) for part in np.split(order, splits)]
+
+
+def _fill_box(box: np.ndarray, box_missing: np.ndarray, blur_sigma: float) -> np.ndarray:
+    """The box with its missing pixels extended from the nearest known ones, then blurred (float32)."""
     extended = box.astype(np.float32)
     hole_y, hole_x = geometry.mask_pixels(box_missing)
     near = nearest_known(box_missing, hole_y, hole_x)
     extended[hole_y, hole_x] = extended.reshape(-1, *box.shape[2:])[near]
     smoothed = cv2.GaussianBlur(extended, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
-    out = image.copy()
-    region = out[y0:y0 + box.shape[0], x0:x0 + box.shape[1]]
-    region[box_missing] = np.clip(smoothed[box_missing] + 0.5, 0, 255).astype(image.dtype)
-    return out
+    return np.clip(smoothed + 0.5, 0, 255).astype(box.dtype)
 
 
 def nearest_known(missing: np.ndarray, ys: np.ndarray, xs: np.ndarray,

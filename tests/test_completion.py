@@ -175,3 +175,15 @@ def test_nan_median_columns_equals_numpy_nanmedian():
     result = completion._nan_median_columns(values)
     assert result.dtype == np.float32
     np.testing.assert_array_equal(result, np.nanmedian(values, axis=0))
+
+
+def test_dilate_by_increasing_radii_equals_square_kernels():
+    rng = np.random.default_rng(6)
+    mask = rng.random((90, 130)) < 0.01
+    mask[:, :3] = True
+    radii = (0, 2, 2, 7, 40)
+    for radius, grown in zip(radii, completion._dilate(mask, *radii)):
+        square = cv2.dilate(mask.astype(np.uint8), np.ones((2 * radius + 1,) * 2, np.uint8)) > 0
+        np.testing.assert_array_equal(grown, square)
+    with pytest.raises(ValueError):
+        completion._dilate(mask, 5, 3)

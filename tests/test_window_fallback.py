@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -59,6 +60,20 @@ def test_fill_of_a_smooth_gradient_is_close_and_continuous():
     assert error.max() < 40
     # No seam: the first filled column continues the last known one.
     assert np.abs(out[:, 170].astype(int) - out[:, 169].astype(int)).max() <= 3
+
+
+def test_fill_of_a_hole_does_not_depend_on_holes_elsewhere():
+    rng = np.random.default_rng(8)
+    image = cv2.GaussianBlur(rng.integers(0, 256, (240, 320, 3), dtype=np.uint8), (0, 0), 3)
+    corner = np.zeros((240, 320), bool)
+    corner[:6, :9] = True
+    far = np.zeros((240, 320), bool)
+    far[200:230, 280:320] = True
+    far[100:104, 150:153] = True
+    together = smooth_fill(image, corner | far)
+    np.testing.assert_array_equal(together[corner], smooth_fill(image, corner)[corner])
+    np.testing.assert_array_equal(together[far], smooth_fill(image, far)[far])
+    np.testing.assert_array_equal(together[~(corner | far)], image[~(corner | far)])
 
 
 def test_fill_with_nothing_known_or_nothing_missing():
