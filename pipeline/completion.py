@@ -211,7 +211,7 @@ class _LocalError:
     around the missing area), and a call takes a warped neighbour's samples there."""
 
     def __init__(self, target: np.ndarray, known: np.ndarray, ys: np.ndarray, xs: np.ndarray, radius: int) -> None:
-        height, width = known.shape
+        width = known.shape[1]
         near = fallback.nearest_known(~known, ys, xs, mask_size=5)  # the L2 5x5 approximation
         self.point_of, self.window, band = _windows(np.ascontiguousarray(known), near, radius)
         self.band_y, self.band_x = band // width, band % width

@@ -44,7 +44,7 @@ def _groups(ys: np.ndarray, xs: np.ndarray, shape: tuple[int, int], gap: int) ->
     cell_y, cell_x = ys // gap, xs // gap
     occupied = np.zeros((shape[0] // gap + 1, shape[1] // gap + 1), np.uint8)
     occupied[cell_y, cell_x] = 1
-    count, labels = cv2.connectedComponents(cv2.dilate(occupied, np.ones((3, 3), np.uint8)), connectivity=8)
+    _, labels = cv2.connectedComponents(cv2.dilate(occupied, np.ones((3, 3), np.uint8)), connectivity=8)
     label = labels[cell_y, cell_x]
     order = np.argsort(label, kind="stable")
     splits = np.flatnonzero(np.diff(label[order])) + 1
