@@ -26,15 +26,19 @@ def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4
         return np.zeros_like(image)
     pad = int(3 * blur_sigma) + 2
     out = image.copy()
+    whole: np.ndarray | None = None  # the full frame's fill, made at most once
     ys, xs = geometry.mask_pixels(missing)
     for group_y, group_x in _groups(ys, xs, missing.shape, pad):
         y0, y1 = max(group_y.min() - pad, 0), min(group_y.max() + pad + 1, missing.shape[0])
         x0, x1 = max(group_x.min() - pad, 0), min(group_x.max() + pad + 1, missing.shape[1])
-        box = (slice(y0, y1), slice(x0, x1))
-        if missing[box].all():  # the hole fills its whole neighbourhood: look at the full frame instead
-            box = (slice(0, missing.shape[0]), slice(0, missing.shape[1]))
-        filled = _fill_box(image[box], missing[box], blur_sigma)
-        out[group_y, group_x] = filled[group_y - box[0].start, group_x - box[1].start]
+        if missing[y0:y1, x0:x1].all():  # the hole fills its whole neighbourhood: look at the full frame instead
+            if whole is None:
+                whole = _fill_box(image, missing, blur_sigma)
+            smoothed, (y0, x0) = whole, (0, 0)
+        else:
+            smoothed = _fill_box(image[y0:y1, x0:x1], missing[y0:y1, x0:x1], blur_sigma)
+        values = smoothed[group_y - y0, group_x - x0]
+        out[group_y, group_x] = np.clip(values + 0.5, 0, 255).astype(image.dtype)
     return out
 
 
@@ -57,8 +61,7 @@ def _fill_box(box: np.ndarray, box_missing: np.ndarray, blur_sigma: float) -> np
     hole_y, hole_x = geometry.mask_pixels(box_missing)
     near = nearest_known(box_missing, hole_y, hole_x)
     extended[hole_y, hole_x] = extended.reshape(-1, *box.shape[2:])[near]
-    smoothed = cv2.GaussianBlur(extended, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
-    return np.clip(smoothed + 0.5, 0, 255).astype(box.dtype)
+    return cv2.GaussianBlur(extended, (0, 0), blur_sigma, borderType=cv2.BORDER_REPLICATE)
 
 
 def nearest_known(missing: np.ndarray, ys: np.ndarray, xs: np.ndarray,
