@@ -8,6 +8,8 @@ each output against its input, once per clip and method (outputs do not change b
 
 Peers (skipped with a one-line note when absent): ffmpeg's two-pass vid.stab and one-pass deshake
 (defaults), and OpenCV's videostab sample program built by benchmarks/peers/build_opencv_videostab.sh.
+One reference that stabilizes nothing: "x264 only", ffmpeg decoding the clip and encoding it with the
+x264 settings ffviz and the ffmpeg peers use, the cost every method writing H.264 pays whatever it does.
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ OPENCV_VIDEOSTAB = REPO / ".cache" / "peers" / "videostab" / "videostab"  # wher
 BUILD_SCRIPT = "benchmarks/peers/build_opencv_videostab.sh"
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".webm")
 MODES = ("full", "crop", "none")
-PEERS = ("vidstab", "deshake", "opencv")
+PEERS = ("vidstab", "deshake", "opencv", "x264")
+X264_ONLY = "x264 only"  # the reference row's method name
 DEFAULT_OUT = Path("bench_out")  # git-ignored
 DEMO_FRAMES = 120  # the synthetic clip used when no real clips are present (as `ffviz demo`)
 
@@ -150,6 +153,10 @@ def _deshake_passes(clip: Path, out: Path, work: Path) -> list[list[str]]:
     return [["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-vf", "format=yuv420p,deshake", *_X264, str(out)]]
 
 
+def _x264_passes(clip: Path, out: Path, work: Path) -> list[list[str]]:
+    return [["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-vf", "format=yuv420p", *_X264, str(out)]]
+
+
 def _opencv_passes(clip: Path, out: Path, work: Path) -> list[list[str]]:
     # One-pass stabilizer (-et=no), no trimming (-t=0): borders filled by consistent mosaicing, then
     # Telea inpainting, plus its deblurring: the sample's closest match to ffviz --mode full.
@@ -158,10 +165,11 @@ def _opencv_passes(clip: Path, out: Path, work: Path) -> list[list[str]]:
              "-t=0", "-et=no"]]
 
 
-def _ffmpeg_has_filter(name: str) -> bool:
+def _ffmpeg_lists(kind: str, name: str) -> bool:
+    """Whether the installed ffmpeg lists ``name`` among its ``kind`` ("filters", "encoders")."""
     if shutil.which("ffmpeg") is None:
         return False
-    listing = subprocess.run(["ffmpeg", "-hide_banner", "-filters"], capture_output=True, text=True).stdout
+    listing = subprocess.run(["ffmpeg", "-hide_banner", f"-{kind}"], capture_output=True, text=True).stdout
     return any(line.split()[1:2] == [name] for line in listing.splitlines())
 
 
@@ -171,12 +179,12 @@ def peer_methods(names: Sequence[str]) -> tuple[list[Method], list[str]]:
     notes: list[str] = []
     for name in names:
         if name == "vidstab":
-            if _ffmpeg_has_filter("vidstabdetect"):
+            if _ffmpeg_lists("filters", "vidstabdetect"):
                 methods.append(Method("vidstab", ".mp4", _vidstab_passes))
             else:
                 notes.append("vidstab skipped: no ffmpeg with vidstabdetect (apt-get install ffmpeg)")
         elif name == "deshake":
-            if _ffmpeg_has_filter("deshake"):
+            if _ffmpeg_lists("filters", "deshake"):
                 methods.append(Method("deshake", ".mp4", _deshake_passes))
             else:
                 notes.append("deshake skipped: no ffmpeg with deshake (apt-get install ffmpeg)")
@@ -185,6 +193,11 @@ def peer_methods(names: Sequence[str]) -> tuple[list[Method], list[str]]:
                 methods.append(Method("opencv", ".avi", _opencv_passes))
             else:
                 notes.append(f"opencv skipped: {OPENCV_VIDEOSTAB} not built (run {BUILD_SCRIPT})")
+        elif name == "x264":
+            if _ffmpeg_lists("encoders", "libx264"):
+                methods.append(Method(X264_ONLY, ".mp4", _x264_passes))
+            else:
+                notes.append("x264 skipped: no ffmpeg with libx264 (apt-get install ffmpeg)")
     return methods, notes
 
 

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ffviz.bench import BenchRow
+from ffviz.bench import X264_ONLY, BenchRow
 
 # (column, value of a row, format); None prints as "-".
 COLUMNS: tuple[tuple[str, Callable[[BenchRow], object], str], ...] = (
@@ -137,6 +137,23 @@ def targets(rows: Sequence[BenchRow]) -> list[str]:
         else:
             verdict = "met" if row.fps >= HD_TARGET_FPS else "not met"
             lines.append(f"  {clip}: ffviz full {row.fps:.2f} fps vs the {HD_TARGET_FPS:g} fps target: {verdict}")
+    return lines + _encoder_floor(grouped)
+
+
+def _encoder_floor(grouped: dict[str, dict[str, BenchRow]]) -> list[str]:
+    """What the encoder alone costs, as a share of the methods' times (those that write H.264 like it)."""
+    lines = []
+    for clip, methods in grouped.items():
+        floor = methods.get(X264_ONLY)
+        if floor is None or not floor.seconds:
+            continue
+        shares = [f"{100 * floor.seconds / methods[name].seconds:.0f} % of {name}'s"
+                  for name in ("vidstab", "ffviz none", "ffviz crop", "ffviz full")
+                  if name in methods and methods[name].seconds]
+        lines.append(f"  {clip}: {X264_ONLY} {floor.seconds:.2f} s" + (" = " + ", ".join(shares) if shares else ""))
+    if lines:
+        lines.insert(0, f"encoder floor ({X264_ONLY}: ffmpeg decoding and encoding with the same x264 settings, "
+                        "nothing stabilized):")
     return lines
 
 

@@ -32,7 +32,7 @@ def tiny_clip(tmp_path_factory):
 @pytest.fixture(scope="module")
 def bench_run(tiny_clip, tmp_path_factory):
     out = tmp_path_factory.mktemp("bench-out")
-    code = main(["bench", str(tiny_clip), "--modes", "crop,none", "--peers", "vidstab,deshake,opencv",
+    code = main(["bench", str(tiny_clip), "--modes", "crop,none", "--peers", "vidstab,deshake,opencv,x264",
                  "--out", str(out)])
     assert code == 0
     rows = {row["method"]: row for row in json.loads((out / "bench.json").read_text())["rows"]}
@@ -82,6 +82,9 @@ def test_installed_peers_get_rows(bench_run):
         assert row["jitter_px"] is not None and row["black"] is not None
         assert row["codec"] == ("mpeg4" if peer == "opencv" else "h264") and row["kbit_s"] > 0
     assert rows["vidstab"]["jitter_px"] < rows["input"]["jitter_px"]
+    floor = rows["x264 only"]  # the encoder alone: the input's own shake, its frames, ffviz's codec
+    assert floor["note"] is None and floor["codec"] == "h264" and floor["fps"] > 0
+    assert floor["jitter_px"] == pytest.approx(rows["input"]["jitter_px"], rel=0.1)
 
 
 def test_missing_video_is_one_line_error(tmp_path, capsys):
@@ -96,7 +99,7 @@ def test_missing_video_is_one_line_error(tmp_path, capsys):
 def test_unknown_peer_is_one_line_error(tiny_clip, tmp_path, capsys):
     assert main(["bench", str(tiny_clip), "--peers", "vidstab,handbrake", "--out", str(tmp_path)]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        "ffviz: error: --peers: unknown handbrake (choose from vidstab, deshake, opencv)"]
+        "ffviz: error: --peers: unknown handbrake (choose from vidstab, deshake, opencv, x264)"]
 
 
 def test_peak_memory_is_the_childs_own():
@@ -164,3 +167,6 @@ def test_targets_compare_ffviz_with_its_peers_and_the_1080p_goal():
     slow = "\n".join(targets(rows[:-1] + [row("hd.mp4", "ffviz full", (1920, 1080), 30.0)]))
     assert "hd.mp4: ffviz full 2.00 fps vs the 3 fps target: not met" in slow
     assert any("no clip of 1080+ rows" in line for line in targets(rows[:5]))
+    assert not any("encoder floor" in line for line in targets(rows))  # no x264-only row: no floor block
+    floor = "\n".join(targets(rows + [row("a.mp4", "x264 only", (640, 360), 1.5)]))
+    assert "a.mp4: x264 only 1.50 s = 50 % of vidstab's, 25 % of ffviz none's, 5 % of ffviz full's" in floor
