@@ -62,6 +62,7 @@ while the cost of eq. 24 grows with the disc's area: radius 4 does 40 % less wor
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -410,13 +411,17 @@ def _order_image(shape: tuple[int, int], visits: np.ndarray) -> np.ndarray:
     return order
 
 
+@functools.lru_cache(maxsize=8)
 def _disc_offsets(radius: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Offsets (dy, dx) with 0 < |d| <= radius and their distance weights 1/|d|."""
+    """Offsets (dy, dx) with 0 < |d| <= radius and their distance weights 1/|d| (made once per radius, read-only)."""
     r = np.arange(-radius, radius + 1)
     dy, dx = (a.ravel() for a in np.meshgrid(r, r, indexing="ij"))
     dist = np.hypot(dy, dx)
     keep = (dist > 0) & (dist <= radius)
-    return dy[keep].astype(np.int64), dx[keep].astype(np.int64), 1.0 / dist[keep]
+    offsets = dy[keep].astype(np.int64), dx[keep].astype(np.int64), 1.0 / dist[keep]
+    for array in offsets:
+        array.flags.writeable = False
+    return offsets
 
 
 def fast_marching(known: np.ndarray, region: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

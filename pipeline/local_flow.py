@@ -155,9 +155,10 @@ def _flow(first: np.ndarray, second: np.ndarray, common: np.ndarray, config: Loc
 
 
 def _sample_maps(flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cv2.remap's maps for sampling at p + flow(p): x + flow_x, y + flow_y (float32)."""
     height, width = flow.shape[:2]
-    grid_x, grid_y = np.meshgrid(np.arange(width, dtype=np.float32), np.arange(height, dtype=np.float32))
-    return grid_x + flow[..., 0], grid_y + flow[..., 1]
+    return (np.arange(width, dtype=np.float32)[None, :] + flow[..., 0],
+            np.arange(height, dtype=np.float32)[:, None] + flow[..., 1])
 
 
 def _lands_inside(flow: np.ndarray, neighbour_valid: np.ndarray) -> np.ndarray:

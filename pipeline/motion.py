@@ -245,7 +245,7 @@ def _warp_gray(curr_gray: np.ndarray, curr_from_prev: np.ndarray) -> np.ndarray:
     """curr resampled into prev's pixel grid: out(p) = curr(curr_from_prev p)."""
     height, width = curr_gray.shape
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-    if np.allclose(curr_from_prev[2], [0, 0, 1]):
+    if geometry.is_affine(curr_from_prev):
         return cv2.warpAffine(curr_gray, curr_from_prev[:2], (width, height), flags=flags, borderMode=cv2.BORDER_REPLICATE)
     return cv2.warpPerspective(curr_gray, curr_from_prev, (width, height), flags=flags, borderMode=cv2.BORDER_REPLICATE)
 

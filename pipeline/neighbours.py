@@ -42,6 +42,8 @@ def remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray,
     rows = -(-count // columns)
 
     def as_map(values: np.ndarray) -> np.ndarray:
+        if count == rows * columns:
+            return np.ascontiguousarray(values).reshape(rows, columns)
         padded = np.full(rows * columns, -2.0, np.float32)
         padded[:count] = values
         return padded.reshape(rows, columns)

@@ -30,7 +30,7 @@ def warp(image: np.ndarray, orig_from_out: np.ndarray, size: tuple[int, int] | N
     out_size = size or (width, height)
     flags = interpolation | cv2.WARP_INVERSE_MAP
     m = np.asarray(orig_from_out, dtype=np.float64)
-    if np.allclose(m[2], [0.0, 0.0, 1.0]):
+    if geometry.is_affine(m):
         return cv2.warpAffine(image, m[:2], out_size, dst=out, flags=flags, borderMode=cv2.BORDER_CONSTANT,
                               borderValue=border_value)
     return cv2.warpPerspective(image, m, out_size, dst=out, flags=flags, borderMode=cv2.BORDER_CONSTANT,
