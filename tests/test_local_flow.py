@@ -197,6 +197,15 @@ def test_large_motion_rescue_finds_what_the_flow_misses(photo, motion):
     assert share_found(LocalFlowConfig(rescue_error=None)) < 0.1  # measured 0: DIS alone misses it
 
 
+def test_rounding_to_uint8_equals_numpys_for_nonnegative_values():
+    from pipeline.local_flow import _round_to_uint8
+
+    rng = np.random.default_rng(2)
+    values = np.concatenate([rng.uniform(0, 300, 100_000), np.arange(0, 258, 0.5),  # every .5 tie up to 257.5
+                             [254.49999, 255.49998, 1e-7, 0.0]]).astype(np.float32).reshape(-1, 1)
+    np.testing.assert_array_equal(_round_to_uint8(values), np.clip(np.round(values), 0, 255).astype(np.uint8))
+
+
 def test_config_rejects_unknown_method():
     with pytest.raises(ValueError):
         LocalFlowConfig(method="horn-schunck")
