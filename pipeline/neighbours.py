@@ -116,11 +116,8 @@ class WarpedNeighbour:
         stab_from_box = np.array([[1.0, 0.0, cols.start], [0.0, 1.0, rows.start], [0.0, 0.0, 1.0]])
         size = (cols.stop - cols.start, rows.stop - rows.start)
         orig_from_box = self.other_from_stab @ stab_from_box
-        rgb = warping.warp(self.original, orig_from_box, size)
-        coverage = warping.warp(np.full(self.original.shape[:2], 255, np.uint8), orig_from_box, size)
-        missing = coverage < 255
-        warping.blacken(rgb, missing)
-        return rgb, ~missing
+        warped = warping.warp_frame(self.original, orig_from_box, size)
+        return warped.frame, ~warped.missing
 
     def _crop_small(self, box: tuple[slice, slice], size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
         small = self._small_original()
@@ -134,11 +131,8 @@ class WarpedNeighbour:
         small_from_orig = np.array([[scale_x, 0.0, 0.5 * scale_x - 0.5], [0.0, scale_y, 0.5 * scale_y - 0.5],
                                     [0.0, 0.0, 1.0]])
         small_from_work = small_from_orig @ self.other_from_stab @ stab_from_work
-        rgb = warping.warp(small, small_from_work, size)
-        coverage = warping.warp(np.full(small.shape[:2], 255, np.uint8), small_from_work, size)
-        missing = coverage < 255
-        warping.blacken(rgb, missing)
-        return rgb, ~missing
+        warped = warping.warp_frame(small, small_from_work, size)
+        return warped.frame, ~warped.missing
 
     def sample(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Bilinear samples at stabilized points (float arrays of one shape): (colours (..., 3) uint8,

@@ -54,11 +54,12 @@ def blacken(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return image
 
 
-def warp_frame(rgb: np.ndarray, orig_from_out: np.ndarray) -> WarpResult:
-    """The stabilized frame and its missing mask (pixels not fully covered by the original)."""
+def warp_frame(rgb: np.ndarray, orig_from_out: np.ndarray, size: tuple[int, int] | None = None) -> WarpResult:
+    """The stabilized frame and its missing mask (pixels not fully covered by the original); ``size`` (width,
+    height) of the output, default the input's."""
     height, width = rgb.shape[:2]
-    frame = warp(rgb, orig_from_out)
-    coverage = warp(np.full((height, width), 255, np.uint8), orig_from_out)
+    frame = warp(rgb, orig_from_out, size)
+    coverage = warp(np.full((height, width), 255, np.uint8), orig_from_out, size)
     # Anything short of full coverage blended in black from outside the frame: count it as missing.
     missing = coverage < 255
     blacken(frame, missing)
