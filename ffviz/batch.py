@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-from pipeline import segments
+from pipeline import segments, video_io
 from pipeline import stabilize as stab
 from pipeline.errors import ConfigError, FFVizError, InputError
 from pipeline.observer import NullObserver, Observers, Stamp
@@ -31,15 +31,14 @@ class VideoJob:
     input: Path
     output: Path
     config: stab.StabilizeConfig
-    crf: int = 18
-    preset: str = "medium"
+    encoding: video_io.Encoding = video_io.Encoding()
     rrd: Path | None = None
     record_level: str = "summary"
     jpeg_quality: int | None = 80
 
     def settings(self) -> str:
         """What the output depends on besides the input file (compared on re-runs)."""
-        return repr((self.config, self.crf, self.preset))
+        return repr((self.config, self.encoding))
 
 
 @dataclass
@@ -137,11 +136,11 @@ def stabilize_one(job: VideoJob, segment_frames: int = 0, mapper: segments.Mappe
         if segment_frames:
             report = segments.run(job.input, job.output, job.config, segment_frames=segment_frames,
                                   mapper=mapper or segments.serial_map, observer=observer, overwrite=True,
-                                  crf=job.crf, preset=job.preset)
+                                  encoding=job.encoding)
         else:
             # One core per Ray task (num_cpus=1): the task's frames are rendered on one thread.
-            report = stab.stabilize(job.input, job.output, job.config, observer=observer, overwrite=True, crf=job.crf,
-                                    preset=job.preset, workers=1)
+            report = stab.stabilize(job.input, job.output, job.config, observer=observer, overwrite=True,
+                                    encoding=job.encoding, workers=1)
         _write_marker(job)
     except Exception as error:  # noqa: BLE001 - reported in the summary, the other videos go on
         if recorder is not None:
@@ -280,7 +279,7 @@ def add_parser(commands: Any, add_stabilize_options: Callable[[argparse.Argument
     add_stabilize_options(p)
 
 
-def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig) -> list[VideoJob]:
+def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: video_io.Encoding) -> list[VideoJob]:
     inputs = expand_inputs(args.inputs)
     outdir = args.output_dir
     if not outdir.is_dir():
@@ -291,7 +290,7 @@ def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig) -> list[Vi
     rrd_dir = None
     if args.rrd is not None:
         rrd_dir = outdir / "recordings" if args.rrd == Path("AUTO") else args.rrd
-    return [VideoJob(i.absolute(), o.absolute(), config, crf=args.crf, preset=args.preset,
+    return [VideoJob(i.absolute(), o.absolute(), config, encoding=encoding,
                      rrd=(rrd_dir / f"{i.stem}.rrd").absolute() if rrd_dir else None,
                      record_level=args.record, jpeg_quality=None if args.lossless else 80)
             for i, o in zip(inputs, output_paths(inputs, outdir))]
@@ -311,14 +310,14 @@ def summary_table(results: Sequence[VideoResult]) -> str:
     return "\n".join(line.rstrip() for line in lines)
 
 
-def cmd_batch(args: argparse.Namespace, config: stab.StabilizeConfig) -> int:
+def cmd_batch(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: video_io.Encoding) -> int:
     from tqdm import tqdm
 
     if args.jobs is not None and args.jobs < 1:
         raise ConfigError(f"--jobs must be at least 1, not {args.jobs}")
     if args.segment_frames < 0:
         raise ConfigError(f"--segment-frames must be 0 (off) or more, not {args.segment_frames}")
-    job_list = _job_list(args, config)
+    job_list = _job_list(args, config, encoding)
     connect(args.address, args.jobs)
     counts = {"done": 0, "skipped": 0, "failed": 0}
     bar = tqdm(total=len(job_list), desc="videos", unit="video", file=sys.stderr, dynamic_ncols=True)

@@ -36,6 +36,9 @@ OPENCV_VIDEOSTAB = REPO / ".cache" / "peers" / "videostab" / "videostab"  # wher
 BUILD_SCRIPT = "benchmarks/peers/build_opencv_videostab.sh"
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".webm")
 MODES = ("full", "crop", "none")
+# A mode with "-mpeg4" writes the OpenCV sample's codec (--codec mpeg4): its chain compared without x264's cost.
+MPEG4_MODES = tuple(f"{mode}-mpeg4" for mode in MODES)
+DEFAULT_MODES = (*MODES, "full-mpeg4")
 PEERS = ("vidstab", "deshake", "opencv", "x264")
 X264_ONLY = "x264 only"  # the reference row's method name
 DEFAULT_OUT = Path("bench_out")  # git-ignored
@@ -128,12 +131,14 @@ class Method:
 
 
 def ffviz_command(clip: Path, output: Path, mode: str) -> list[str]:
+    """``mode``: one of MODES, or of MPEG4_MODES."""
+    mode, _, codec = mode.partition("-")
     return [sys.executable, "-m", "ffviz.cli", "stabilize", str(clip), "-o", str(output), "--mode", mode,
-            "--overwrite"]
+            "--overwrite", *(["--codec", codec] if codec else [])]
 
 
 def ffviz_method(mode: str) -> Method:
-    return Method(f"ffviz {mode}", ".mp4", lambda clip, out, work: [ffviz_command(clip, out, mode)])
+    return Method(f"ffviz {mode.replace('-', ' ')}", ".mp4", lambda clip, out, work: [ffviz_command(clip, out, mode)])
 
 
 # Peers encode as ffviz does (x264 CRF 18, one output frame per input frame at the input's timestamps).
@@ -318,8 +323,9 @@ def add_parser(commands: Any) -> None:
     p.add_argument("videos", type=Path, nargs="*", metavar="VIDEO",
                    help=f"clips or folders of clips (default: the clips in {SHARED_VIDEOS} if present, "
                         "else the synthetic demo clip)")
-    p.add_argument("--modes", default=",".join(MODES),
-                   help="ffviz modes, comma-separated, or '' for peers only (default: %(default)s)")
+    p.add_argument("--modes", default=",".join(DEFAULT_MODES),
+                   help="ffviz modes, comma-separated, or '' for peers only; MODE-mpeg4 writes MPEG-4 Part 2 "
+                        "as the OpenCV sample does (default: %(default)s)")
     p.add_argument("--peers", default=",".join(PEERS),
                    help="peer methods, comma-separated, or none (default: %(default)s)")
     p.add_argument("--repeat", type=int, default=1, metavar="N", help="runs per clip and method; the table "
@@ -373,7 +379,7 @@ def _synthetic_clip(folder: Path) -> Path:
 def cmd_bench(args: argparse.Namespace) -> int:
     from ffviz import bench_report as report
 
-    modes = _choices(args.modes, MODES, "--modes")
+    modes = _choices(args.modes, MODES + MPEG4_MODES, "--modes")
     peers = [] if args.peers.strip() == "none" else _choices(args.peers, PEERS, "--peers")  # "none" is also a mode
     if args.repeat < 1:
         raise ConfigError(f"--repeat must be at least 1, not {args.repeat}")

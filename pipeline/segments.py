@@ -96,13 +96,13 @@ def render_segment(path: Path, config: stab.StabilizeConfig, frames: range, curr
     """Pass 2 over one segment; the window reads ``render_radius(config)`` frames beyond each end."""
     collector = _SegmentCollector()
     stab.render(FileSource(path), None, curr_from_prev, smoothed, orig_from_out, config, observer=collector,
-                progress=null_progress, total=len(frames), crf=0, frames=frames)
+                progress=null_progress, total=len(frames), frames=frames)
     return RenderedSegment(frames, collector.pts, collector.times_s, collector.output)
 
 
 def run(input_path: Path | str, output_path: Path | str | None, config: stab.StabilizeConfig = stab.StabilizeConfig(),
         *, segment_frames: int, mapper: Mapper = serial_map, observer: Observer | None = None,
-        overwrite: bool = False, crf: int = 18, preset: str = "medium",
+        overwrite: bool = False, encoding: video_io.Encoding = video_io.Encoding(),
         on_segment: Callable[[int, int], None] | None = None,
         ) -> stab.StabilizeReport:
     """Stabilize one video segment by segment (``mapper`` decides where the segments run).
@@ -145,7 +145,7 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
     writer = None
     if output_path is not None:
         writer = video_io.VideoWriter(output_path, like=info, audio_from=info.path if info.has_audio else None,
-                                      crf=crf, preset=preset)
+                                      encoding=encoding)
     try:
         written = 0
         for done, segment in enumerate(mapper(render_segment, jobs), start=1):

@@ -161,24 +161,25 @@ def output_transforms(orig_from_stab: np.ndarray, mode: str, width: int, height:
 
 def stabilize(input_path: Path | str, output_path: Path | str | None, config: StabilizeConfig = StabilizeConfig(), *,
               observer: Observer | None = None, progress: ProgressFactory = null_progress,
-              overwrite: bool = False, crf: int = 18, preset: str = "medium", workers: int | None = None,
-              ) -> StabilizeReport:
+              overwrite: bool = False, encoding: video_io.Encoding = video_io.Encoding(),
+              workers: int | None = None) -> StabilizeReport:
     """Stabilize ``input_path`` into ``output_path`` (None: run and observe, write nothing).
 
-    ``crf``, ``preset``: x264's quality and speed/size trade-off for the output. ``workers``: frames rendered at
+    ``encoding``: the output's codec and quality (H.264 at CRF 18 by default). ``workers``: frames rendered at
     once on threads (None: one per CPU core); the frames written are the same."""
     input_path = Path(input_path)
     output_path = Path(output_path) if output_path is not None else None
     source = FileSource(input_path)
     if output_path is not None:
         video_io.check_output_path(output_path, input_path, overwrite=overwrite)
-    return stabilize_source(source, output_path, config, observer=observer, progress=progress, crf=crf,
-                            preset=preset, workers=workers)
+    return stabilize_source(source, output_path, config, observer=observer, progress=progress, encoding=encoding,
+                            workers=workers)
 
 
 def stabilize_source(source: FrameSource, output_path: Path | None, config: StabilizeConfig = StabilizeConfig(), *,
                      observer: Observer | None = None, progress: ProgressFactory = null_progress,
-                     crf: int = 18, preset: str = "medium", workers: int | None = None) -> StabilizeReport:
+                     encoding: video_io.Encoding = video_io.Encoding(), workers: int | None = None,
+                     ) -> StabilizeReport:
     """The two passes over any frame source; the output (if any) must already be checked."""
     observer = observer or NullObserver()
     workers = parallel.default_workers() if workers is None else max(int(workers), 1)
@@ -206,7 +207,7 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
 
     started = time.perf_counter()
     for message in render(source, output_path, motion_pass.curr_from_prev, smoothed, orig_from_out, config,
-                          observer=observer, progress=progress, total=n_frames, crf=crf, preset=preset,
+                          observer=observer, progress=progress, total=n_frames, encoding=encoding,
                           workers=workers):
         add_warning(warnings, observer, message)
     report = StabilizeReport(
@@ -225,8 +226,9 @@ def add_warning(sink: list[tuple[int | None, str]], observer: Observer, message:
 
 def render(source: FrameSource, output_path: Path | None, curr_from_prev: np.ndarray,
             smoothed: smoothing.SmoothingResult, orig_from_out: np.ndarray, config: StabilizeConfig, *,
-            observer: Observer, progress: ProgressFactory, total: int, crf: int,
-            frames: range | None = None, workers: int = 1, preset: str = "medium") -> list[str]:
+            observer: Observer, progress: ProgressFactory, total: int,
+            encoding: video_io.Encoding = video_io.Encoding(), frames: range | None = None, workers: int = 1,
+            ) -> list[str]:
     """Pass 2; returns the writer's warnings (odd size padded, timestamps nudged, audio cut short).
 
     ``frames``: render only these (a segment); the window still reads ``radius`` frames either side of the
@@ -240,8 +242,8 @@ def render(source: FrameSource, output_path: Path | None, curr_from_prev: np.nda
     bar = progress("pass 2/2: warp + complete + encode" if full else "pass 2/2: warp + encode", total)
     info = source.info
     audio_from = info.path if info.has_audio else None
-    writer = video_io.VideoWriter(output_path, like=info, audio_from=audio_from, crf=crf,
-                                  preset=preset) if output_path else None
+    writer = video_io.VideoWriter(output_path, like=info, audio_from=audio_from,
+                                  encoding=encoding) if output_path else None
     try:
         with one_pass(source) as decoded:
             windows = sliding_window(decoded, radius)

@@ -72,7 +72,8 @@ def test_rerun_skips_complete_outputs_and_redoes_changed_settings(batch_run, cap
     jobs, first = batch_run
     again = batch.run_batch(jobs, jobs=2)
     assert [r.status for r in again] == ["skipped", "failed", "skipped", "skipped"]
-    changed = [batch.VideoJob(job.input, job.output, job.config, crf=job.crf + 1) for job in jobs]
+    changed = [batch.VideoJob(job.input, job.output, job.config, encoding=video_io.Encoding(crf=job.encoding.crf + 1))
+               for job in jobs]
     assert not any(batch.is_complete(job) for job in changed)
     # The CLI over the same folder (Ray already up): summary table, failure's exit code.
     outdir = jobs[0].output.parent

@@ -223,6 +223,8 @@ options = st.fixed_dictionaries(
         "--motion-model": mostly(st.sampled_from(["affine", "similarity", "homography"]), st.just("projective")),
         "--refine": mostly(st.sampled_from(["none", "ecc"]), st.just("yes")),
         "--crf": mostly(st.integers(0, 51), st.one_of(st.integers(-(2**31), 2**31), st.sampled_from(["18.5", "best"]))),
+        "--codec": mostly(st.sampled_from(["h264", "mpeg4"]), st.sampled_from(["vp9", ""])),
+        "--qscale": mostly(st.integers(2, 31), st.one_of(st.integers(-(2**31), 2**31), st.sampled_from(["3.5", "q"]))),
         "--deblur-alpha": mostly(st.floats(0.1, 1000), st.floats(allow_nan=True, allow_infinity=True)),
         "--no-deblur": st.just(None),
     },

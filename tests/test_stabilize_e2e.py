@@ -257,6 +257,28 @@ def test_cli_preset_sets_the_encoders_speed_and_keeps_the_frames_close(shaky, tm
     assert not (tmp_path / "x.mp4").exists()
 
 
+def test_cli_codec_mpeg4_writes_mpeg4_close_to_the_h264_output_and_refuses_the_other_codecs_options(
+        shaky, tmp_path, capsys):
+    path, video = shaky
+    outs = {codec: tmp_path / f"out_{codec}.mp4" for codec in ("h264", "mpeg4")}
+    for codec, out in outs.items():
+        assert cli.main(["stabilize", str(path), "-o", str(out), "--mode", "crop", "--no-deblur", "--codec", codec,
+                         "--rrd", str(tmp_path / f"{codec}.rrd")]) == 0
+        with av.open(str(out)) as container:
+            assert container.streams.video[0].codec_context.name == codec
+    (_, h264_frames), (_, mpeg4_frames) = frame_stats(outs["h264"]), frame_stats(outs["mpeg4"])
+    assert len(h264_frames) == len(mpeg4_frames) == video.n_frames
+    assert min(synthetic.psnr(a, b) for a, b in zip(h264_frames, mpeg4_frames)) > 30
+    capsys.readouterr()
+    for argv, words in ((["--codec", "mpeg4", "--crf", "20"], "--crf does not apply to --codec mpeg4"),
+                        (["--qscale", "4"], "--qscale does not apply to --codec h264"),
+                        (["--codec", "mpeg4", "--qscale", "40"], "--qscale must be between 2 and 31")):
+        out = tmp_path / "refused.mp4"
+        assert cli.main(["stabilize", str(path), "-o", str(out), *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert words in err and "\n" not in err and not out.exists()
+
+
 def test_the_stabilize_command_does_not_import_what_only_other_paths_need():
     """Start-up cost: scipy.optimize (~0.5 s to import, crop mode's linear programme only), scipy.ndimage
     (~0.3 s, the sparse-LK flow method only) and the recorder/viewer stack stay out of a plain run's import."""

@@ -12,8 +12,9 @@ import av
 import numpy as np
 import pytest
 
-from pipeline.errors import InputError, OutputError
+from pipeline.errors import ConfigError, InputError, OutputError
 from pipeline.video_io import (
+    Encoding,
     VideoReader,
     VideoWriter,
     check_output_path,
@@ -190,10 +191,37 @@ def test_rotation_metadata_is_applied_to_frames(tmp_path):
 # --- write ----------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("time_base", [Fraction(1, FPS), Fraction(1, 90000)])
+def test_mpeg4_output_keeps_timestamps_and_its_quantiser_trades_bits_for_fidelity(tmp_path, time_base):
+    # 1/90000 is beyond MPEG-4 Part 2's time base limit (65535): frames must keep their times all the same.
+    ticks = round(1 / (FPS * time_base))
+    pts = [i * ticks for i in range(N - 2)] + [(N - 1) * ticks, (N + 2) * ticks]  # VFR at the end
+    source = make_video(tmp_path / "in.mp4", options={"crf": "0"}, pts=pts, time_base=time_base)
+    outputs = {}
+    for q in (2, 12):
+        outputs[q] = tmp_path / f"q{q}.mp4"
+        written, warnings = copy_through(source, outputs[q], encoding=Encoding(codec="mpeg4", qscale=q))
+        assert warnings == []
+        with av.open(str(outputs[q])) as container:
+            assert container.streams.video[0].codec_context.name == "mpeg4"
+        again = read_all(outputs[q])
+        assert [float(f.time_s) for f in again] == pytest.approx([float(f.time_s) for f in written], abs=1e-4)
+        outputs[q] = (outputs[q].stat().st_size, min(psnr(a.rgb, b.rgb) for a, b in zip(written, again)))
+    (fine_bytes, fine_psnr), (coarse_bytes, coarse_psnr) = outputs[2], outputs[12]
+    assert fine_psnr > 30 and fine_psnr > coarse_psnr + 3 and fine_bytes > 1.5 * coarse_bytes
+
+
+@pytest.mark.parametrize("options, word", [({"codec": "vp9"}, "codec"), ({"crf": 52}, "crf"),
+                                           ({"preset": "warp9"}, "preset"), ({"qscale": 1}, "qscale")])
+def test_encoding_refuses_values_its_encoders_cannot_take(options, word):
+    with pytest.raises(ConfigError, match=word):
+        Encoding(**options)
+
+
 def test_round_trip_keeps_count_rate_size_timestamps_and_pixels(tmp_path):
     source = make_video(tmp_path / "in.mp4", options={"crf": "0"})
     target = tmp_path / "out.mp4"
-    written, warnings = copy_through(source, target, crf=18)
+    written, warnings = copy_through(source, target, encoding=Encoding(crf=18))
     assert warnings == []
     info_in, info_out = probe_video(source), probe_video(target)
     assert (info_out.width, info_out.height, info_out.fps) == (info_in.width, info_in.height, info_in.fps)
@@ -508,7 +536,7 @@ def test_real_clip_probe_and_count_match_readme(name):
 def test_real_clip_copy_through_keeps_count_rate_size_and_audio(tmp_path):
     source = real_clip("linyihaolyh_shaky.mp4")
     target = tmp_path / "out.mp4"
-    written, warnings = copy_through(source, target, audio_from=source, preset="veryfast")
+    written, warnings = copy_through(source, target, audio_from=source, encoding=Encoding(preset="veryfast"))
     assert len(written) == 245 and warnings == []
     info = probe_video(target)
     assert (info.width, info.height, info.fps, info.frame_count) == (480, 360, Fraction(25), 245)
