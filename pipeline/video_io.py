@@ -552,7 +552,8 @@ class Encoding:
 
     ``h264`` (default): x264 at constant quality ``crf`` (0-51, lower is better) with its speed/size ``preset``.
     ``mpeg4``: FFmpeg's MPEG-4 Part 2 encoder, which OpenCV's XVID writer uses, at the fixed quantiser
-    ``qscale`` (2-31, lower is better): ~10x less CPU than x264 medium for ~2x the bits at like quality.
+    ``qscale`` (2-31, lower is better): ~10x less CPU than x264 medium for more bits (vplab_C against CRF 18:
+    q 3 1.6x the bits at -1.1 dB PSNR, q 2 2.5x at +0.5 dB).
     """
 
     codec: str = "h264"

@@ -487,6 +487,12 @@ def long_clip(tmp_path_factory) -> Path:
                        options={"preset": "ultrafast"})
 
 
+def _default_sigint() -> None:
+    # Tests started in the background (nohup, `cmd &` in a script) inherit SIGINT ignored, and Python keeps it
+    # ignored in the child, as a background job should: the Ctrl-C this test sends would be lost.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize(("signum", "exit_code", "message"),
                          [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
 def test_signal_mid_run_leaves_no_partial_output(long_clip, tmp_path, signum, exit_code, message):
@@ -495,7 +501,7 @@ def test_signal_mid_run_leaves_no_partial_output(long_clip, tmp_path, signum, ex
     process = subprocess.Popen(
         [sys.executable, "-m", "ffviz.cli", "stabilize", str(long_clip), "-o", str(output), "--mode", "crop",
          "--overwrite"], cwd=ROOT, env={**os.environ, "RERUN_ANALYTICS": "0"},
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
     # Wait for pass 2: its temp file beside the output is the partial output that must not survive.
     deadline = time.monotonic() + 120
     while not temp_leftovers(tmp_path) and process.poll() is None and time.monotonic() < deadline:
