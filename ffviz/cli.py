@@ -129,7 +129,8 @@ MIN_SIGMA, MAX_SIGMA = 1e-6, 1e6  # frames
 
 
 def _check_options(args: argparse.Namespace) -> None:
-    """What the configs cannot check: values argparse parses but x264 or the kernel cannot use."""
+    """What the configs cannot check: values argparse parses but the run or the kernel cannot use (the
+    encoder's values are video_io.Encoding's to check)."""
     if getattr(args, "workers", None) is not None and args.workers < 1:
         raise ConfigError(f"--workers must be at least 1, not {args.workers}")
     if args.smoothing_radius > MAX_RADIUS:
@@ -153,16 +154,15 @@ def _stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
         raise ConfigError(str(error)) from None
 
 
-_ENCODER_OPTIONS = {"h264": ("crf", "preset"), "mpeg4": ("qscale",)}
-
-
 def output_encoding(args: argparse.Namespace) -> video_io.Encoding:
     """--codec and the quality options that belong to it (one that belongs to another codec is an error)."""
-    given = {name: getattr(args, name) for name in ("crf", "preset", "qscale") if getattr(args, name) is not None}
-    stray = [f"--{name}" for name in given if name not in _ENCODER_OPTIONS[args.codec]]
+    own = video_io.CODEC_OPTIONS[args.codec]
+    every = [name for names in video_io.CODEC_OPTIONS.values() for name in names]
+    given = {name: getattr(args, name) for name in every if getattr(args, name) is not None}
+    stray = [f"--{name}" for name in given if name not in own]
     if stray:
         raise ConfigError(f"{' and '.join(stray)} {'does' if len(stray) == 1 else 'do'} not apply to --codec "
-                          f"{args.codec} (its options: {', '.join('--' + n for n in _ENCODER_OPTIONS[args.codec])})")
+                          f"{args.codec} (its options: {', '.join('--' + n for n in own)})")
     try:
         return video_io.Encoding(codec=args.codec, **given)
     except ConfigError as error:
