@@ -541,8 +541,8 @@ class _AudioPassthrough:
 
 X264_PRESETS: tuple[str, ...] = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow",
                                  "slower", "veryslow")
-VIDEO_CODECS: tuple[str, ...] = ("h264", "mpeg4")
-_ENCODERS = {"h264": "libx264", "mpeg4": "mpeg4"}
+_ENCODERS = {"h264": "libx264", "mpeg4": "mpeg4"}  # --codec name -> FFmpeg encoder
+VIDEO_CODECS: tuple[str, ...] = tuple(_ENCODERS)
 CODEC_OPTIONS = {"h264": ("crf", "preset"), "mpeg4": ("qscale",)}  # the Encoding fields each codec uses
 _MPEG4_MAX_TIME_BASE_DENOMINATOR = 65535  # the MPEG-4 Part 2 standard's limit (FFmpeg refuses more)
 
