@@ -1,7 +1,10 @@
 """`ffviz bench`: ffviz's modes against peer stabilizers on the same clips: speed, peak memory, quality.
 
 Every method runs as its own child process and is measured from outside: wall seconds, and peak
-memory from the child's own rusage (os.wait4), so no method pays for the benchmark's Python. Runs are
+memory from the child's own rusage (os.wait4), so no method pays for the benchmark's Python, and the share
+of the machine's CPU time that the hypervisor took meanwhile (steal, /proc/stat): on a virtual machine whose
+host is busy, a program on both cores loses more than one on one core, so ratios between methods move
+with it. Runs are
 interleaved: for each repeat, for each clip, the methods in an order rotated by one at every visit,
 so a drift in the machine's load falls on all methods alike. Quality is pipeline.metrics.compare of
 each output against its input, once per clip and method (outputs do not change between repeats).
@@ -54,6 +57,14 @@ class ChildRun:
     peak_rss_bytes: int  # the largest resident set of the command (or of a child it waited for)
     returncode: int
     output_tail: str  # last non-empty line of its stdout+stderr, for a one-line failure report
+    # Clock ticks of the whole machine while it ran (all CPUs): (stolen by the hypervisor, all). None where
+    # /proc/stat is not available.
+    machine_ticks: tuple[int, int] | None = None
+
+    @property
+    def steal(self) -> float | None:
+        """Share of the machine's CPU time the hypervisor took while the command ran."""
+        return steal_share(self.machine_ticks)
 
 
 # Linux keeps a process's peak RSS across exec, and at exec counts the pages it still shares with the
@@ -91,6 +102,38 @@ def read_measurement(report: Path) -> tuple[float, float, int]:
     return float(seconds), float(cpu_seconds), int(max_rss_kib) * 1024  # ru_maxrss is in KiB on Linux
 
 
+def machine_ticks(stat: Path = Path("/proc/stat")) -> tuple[int, int] | None:
+    """(steal, total) clock ticks of all CPUs since boot, from the "cpu" line of /proc/stat (Linux); None when it
+    cannot be read. Total is user + nice + system + idle + iowait + irq + softirq + steal (guest time is already
+    counted in user and nice)."""
+    try:
+        with stat.open() as f:
+            fields = f.readline().split()
+        ticks = [int(value) for value in fields[1:9]]
+    except (OSError, ValueError):
+        return None
+    if not fields or fields[0] != "cpu" or len(ticks) < 8:
+        return None
+    return ticks[7], sum(ticks)
+
+
+def ticks_between(before: tuple[int, int] | None, after: tuple[int, int] | None) -> tuple[int, int] | None:
+    if before is None or after is None:
+        return None
+    return after[0] - before[0], after[1] - before[1]
+
+
+def add_ticks(a: tuple[int, int] | None, b: tuple[int, int] | None) -> tuple[int, int] | None:
+    return None if a is None or b is None else (a[0] + b[0], a[1] + b[1])
+
+
+def steal_share(ticks: tuple[int, int] | None) -> float | None:
+    """Stolen / all ticks; None when unknown or no tick elapsed."""
+    if ticks is None or ticks[1] <= 0:
+        return None
+    return ticks[0] / ticks[1]
+
+
 def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun:
     """Run a command to its end and measure it: wall and CPU seconds, and peak RSS from its wait4 rusage."""
     with tempfile.TemporaryDirectory(prefix="ffviz-bench-") as tmp:
@@ -98,6 +141,7 @@ def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun
         log_path = Path(tmp) / "log"
         with log_path.open("wb") as log:  # a file, not a pipe: nobody reads while the child runs
             # Own session: Ctrl-C reaches only this process, which then ends the launcher and command together.
+            ticks_before = machine_ticks()
             child = subprocess.Popen(measured_argv(command, report), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd=cwd,
                                      start_new_session=True)
             try:
@@ -106,13 +150,14 @@ def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun
                 os.killpg(child.pid, signal.SIGKILL)
                 child.wait()
                 raise
+            ticks = ticks_between(ticks_before, machine_ticks())
         text = log_path.read_text("utf-8", "replace")
         if not report.is_file():  # the launcher itself failed
             raise RuntimeError(f"measuring launcher failed (exit {returncode}): {text.strip()[-300:]}")
         seconds, cpu_seconds, peak = read_measurement(report)
     lines = [line.strip() for line in text.replace("\r", "\n").splitlines() if line.strip()]
     return ChildRun(seconds=seconds, cpu_seconds=cpu_seconds, peak_rss_bytes=peak, returncode=returncode,
-                    output_tail=lines[-1] if lines else "")
+                    output_tail=lines[-1] if lines else "", machine_ticks=ticks)
 
 
 # -- methods -------------------------------------------------------------------------------------------------
@@ -211,19 +256,21 @@ class MethodFailed(Exception):
 
 
 def run_method(method: Method, clip: Path, output: Path, work: Path) -> ChildRun:
-    """All passes of a method: seconds summed, peak memory the largest of any pass."""
+    """All passes of a method: seconds, CPU seconds and machine ticks summed, peak memory the largest of any pass."""
     output.unlink(missing_ok=True)  # a stale output must not pass for this run's
-    seconds, cpu_seconds, peak = 0.0, 0.0, 0
+    seconds, cpu_seconds, peak, ticks = 0.0, 0.0, 0, (0, 0)
     for command in method.passes(clip, output, work):
         run = run_measured(command)
         seconds += run.seconds
         cpu_seconds += run.cpu_seconds
         peak = max(peak, run.peak_rss_bytes)
+        ticks = add_ticks(ticks, run.machine_ticks)
         if run.returncode != 0:
             raise MethodFailed(f"exit {run.returncode}: {run.output_tail or '(no output)'}")
     if not output.is_file():
         raise MethodFailed(f"exit 0 but no output at {output}")
-    return ChildRun(seconds=seconds, cpu_seconds=cpu_seconds, peak_rss_bytes=peak, returncode=0, output_tail="")
+    return ChildRun(seconds=seconds, cpu_seconds=cpu_seconds, peak_rss_bytes=peak, returncode=0, output_tail="",
+                    machine_ticks=ticks)
 
 
 # -- rows ----------------------------------------------------------------------------------------------------
@@ -247,6 +294,7 @@ class BenchRow:
     frames: int
     seconds_runs: list[float] = field(default_factory=list)
     cpu_seconds_runs: list[float] = field(default_factory=list)
+    steal_runs: list[float] = field(default_factory=list)  # share of the machine's CPU time stolen, per run
     peak_rss_bytes: int | None = None  # the largest over repeats
     quality: Quality | None = None
     error: str = ""
@@ -263,6 +311,10 @@ class BenchRow:
     @property
     def cpu_seconds(self) -> float | None:
         return statistics.median(self.cpu_seconds_runs) if self.cpu_seconds_runs else None
+
+    @property
+    def steal(self) -> float | None:
+        return statistics.median(self.steal_runs) if self.steal_runs else None
 
     @property
     def fps(self) -> float | None:
@@ -432,6 +484,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
                 continue
             row.seconds_runs.append(run.seconds)
             row.cpu_seconds_runs.append(run.cpu_seconds)
+            if run.steal is not None:
+                row.steal_runs.append(run.steal)
             row.peak_rss_bytes = max(row.peak_rss_bytes or 0, run.peak_rss_bytes)
             if row.quality is None and not row.error:
                 try:

@@ -20,6 +20,7 @@ COLUMNS: tuple[tuple[str, Callable[[BenchRow], object], str], ...] = (
     ("seconds", lambda r: r.seconds, "{:.2f}"),
     ("fps", lambda r: r.fps, "{:.2f}"),
     ("cpu_s", lambda r: r.cpu_seconds, "{:.2f}"),
+    ("steal_pct", lambda r: None if r.steal is None else 100 * r.steal, "{:.0f}"),
     ("peak_MiB", lambda r: r.peak_mib, "{:.0f}"),
     ("codec", lambda r: r.codec, "{}"),
     ("kbit_s", lambda r: r.kbit_s, "{:.0f}"),
@@ -65,6 +66,7 @@ def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
     md.write_text("\n".join([
         HEADER, *map(markdown_line, rows), "",
         f"{seconds_note}; fps = input frames / seconds; cpu_s = user + system seconds; "
+        "steal_pct = share of the machine's CPU time the hypervisor took during the run (median); "
         "peak_MiB = the method's peak RSS (wait4); codec, kbit_s = what it wrote (file size over duration); "
         "quality from pipeline.metrics.compare against the input.",
         f"{run.cpus} CPUs; load average {run.load_before[0]:.1f} at the start, {run.load_after[0]:.1f} at the end.",
@@ -76,6 +78,7 @@ def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
     table_json.write_text(json.dumps({
         "run": asdict(run),
         "rows": [{**_flat(r), "seconds_runs": r.seconds_runs, "cpu_seconds_runs": r.cpu_seconds_runs,
+                  "steal_runs": r.steal_runs,
                   "peak_rss_bytes": r.peak_rss_bytes} for r in rows],
     }, indent=2))
     plot(rows, png)
@@ -139,7 +142,20 @@ def targets(rows: Sequence[BenchRow]) -> list[str]:
         else:
             verdict = "met" if row.fps >= HD_TARGET_FPS else "not met"
             lines.append(f"  {clip}: ffviz full {row.fps:.2f} fps vs the {HD_TARGET_FPS:g} fps target: {verdict}")
-    return lines + _encoder_floor(grouped)
+    return lines + _stolen(rows) + _encoder_floor(grouped)
+
+
+STEAL_NOTE = 0.05  # above this share of stolen CPU time a row's speed is flagged
+
+
+def _stolen(rows: Sequence[BenchRow]) -> list[str]:
+    """A warning naming the rows that ran while the hypervisor took a noticeable share of the machine."""
+    flagged = [f"{row.clip} {row.method} {100 * row.steal:.0f} %" for row in rows
+               if row.steal is not None and row.steal > STEAL_NOTE]
+    if not flagged:
+        return []
+    return [f"  steal above {100 * STEAL_NOTE:.0f} % of the machine's CPU time during: {', '.join(flagged)}; "
+            "it slows a program running on every core more than one on fewer, so read those ratios with care"]
 
 
 def _encoder_floor(grouped: dict[str, dict[str, BenchRow]]) -> list[str]:

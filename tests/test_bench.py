@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import shutil
 import sys
 from collections import Counter
@@ -61,6 +62,7 @@ def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
         assert row["frames"] == 30 and row["fps"] > 0 and row["cpu_s"] > 0
         assert row["fps"] == pytest.approx(30 / row["seconds"])
         assert 10 < row["peak_MiB"] < 4096
+        assert len(row["steal_runs"]) == 1 and 0 <= row["steal_pct"] == 100 * row["steal_runs"][0] <= 100
         assert row["jitter_px"] < source["jitter_px"]
         written = out / "outputs" / f"tiny.mp4.ffviz-{mode}.mp4"
         with av.open(str(written)) as container:
@@ -178,3 +180,40 @@ def test_targets_compare_ffviz_with_its_peers_and_the_1080p_goal():
     assert not any("encoder floor" in line for line in targets(rows))  # no x264-only row: no floor block
     floor = "\n".join(targets(rows + [row("a.mp4", "x264 only", (640, 360), 1.5)]))
     assert "a.mp4: x264 only 1.50 s = 50 % of vidstab's, 25 % of ffviz none's, 5 % of ffviz full's" in floor
+
+
+def test_machine_ticks_read_steal_from_proc_stat(tmp_path):
+    stat = tmp_path / "stat"
+    # user nice system idle iowait irq softirq steal guest guest_nice (guest time is inside user and nice)
+    stat.write_text("cpu  300 10 40 500 20 0 5 125 50 0\ncpu0 150 5 20 250 10 0 2 63 25 0\n")
+    assert bench.machine_ticks(stat) == (125, 1000)
+    assert bench.steal_share(bench.ticks_between((100, 1000), (125, 1100))) == 0.25
+    assert bench.steal_share(bench.add_ticks((10, 100), (15, 100))) == 0.125
+    assert bench.steal_share((0, 0)) is None and bench.steal_share(None) is None
+    assert bench.ticks_between(None, (1, 2)) is None and bench.add_ticks((1, 2), None) is None
+    for text in ("", "intr 1 2 3\n", "cpu  1 2 x 4 5 6 7 8\n", "cpu  1 2 3\n"):
+        stat.write_text(text)
+        assert bench.machine_ticks(stat) is None, text
+    assert bench.machine_ticks(tmp_path / "absent") is None
+
+
+@pytest.mark.skipif(bench.machine_ticks() is None, reason="no /proc/stat here")
+def test_run_measured_reports_the_machines_steal():
+    run = bench.run_measured([sys.executable, "-c", "import time; time.sleep(0.3)"])
+    stolen, total = run.machine_ticks
+    # 0.3 s on every CPU is at least 30 ticks of the machine (USER_HZ is 100 on Linux), some perhaps stolen.
+    assert total >= 25 * (os.cpu_count() or 1) and 0 <= stolen <= total
+    assert 0.0 <= run.steal <= 1.0
+
+
+def test_targets_flag_rows_measured_while_the_machine_was_stolen():
+    from ffviz.bench import BenchRow
+    from ffviz.bench_report import markdown_line, targets
+
+    quiet = BenchRow("a.mp4", "opencv", 640, 360, 60, seconds_runs=[10.0], steal_runs=[0.01, 0.02, 0.40])
+    busy = BenchRow("a.mp4", "ffviz full", 640, 360, 60, seconds_runs=[20.0], steal_runs=[0.30, 0.33, 0.20])
+    rows = [BenchRow("a.mp4", "input", 640, 360, 60), quiet, busy]
+    warnings = [line for line in targets(rows) if "steal above" in line]
+    assert len(warnings) == 1 and "a.mp4 ffviz full 30 %" in warnings[0] and "opencv" not in warnings[0]
+    assert "| 2 |" in markdown_line(quiet) and "| 30 |" in markdown_line(busy)  # the median run's share
+    assert not any("steal above" in line for line in targets(rows[:2]))
