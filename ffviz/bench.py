@@ -3,10 +3,9 @@
 Every method runs as its own child process and is measured from outside: wall seconds, and peak
 memory from the child's own rusage (os.wait4), so no method pays for the benchmark's Python, and the share
 of the machine's CPU time that the hypervisor took meanwhile (steal, /proc/stat): on a virtual machine whose
-host is busy, a program on both cores loses more than one on one core, so ratios between methods move
-with it. Runs are
-interleaved: for each repeat, for each clip, the methods in an order rotated by one at every visit,
-so a drift in the machine's load falls on all methods alike. Quality is pipeline.metrics.compare of
+host is busy, a program on both cores loses more than one on one core, so ratios between methods move with
+it. Runs are interleaved: for each repeat, for each clip, the methods in an order rotated by one at every
+visit, so a drift in the machine's load falls on all methods alike. Quality is pipeline.metrics.compare of
 each output against its input, once per clip and method (outputs do not change between repeats).
 
 Peers (skipped with a one-line note when absent): ffmpeg's two-pass vid.stab and one-pass deshake
@@ -140,8 +139,8 @@ def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun
         report = Path(tmp) / "rusage"
         log_path = Path(tmp) / "log"
         with log_path.open("wb") as log:  # a file, not a pipe: nobody reads while the child runs
-            # Own session: Ctrl-C reaches only this process, which then ends the launcher and command together.
             ticks_before = machine_ticks()
+            # Own session: Ctrl-C reaches only this process, which then ends the launcher and command together.
             child = subprocess.Popen(measured_argv(command, report), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd=cwd,
                                      start_new_session=True)
             try:
