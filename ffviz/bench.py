@@ -55,7 +55,7 @@ class ChildRun:
     cpu_seconds: float  # user + system, the command and the children it waited for
     peak_rss_bytes: int  # the largest resident set of the command (or of a child it waited for)
     returncode: int
-    output_tail: str  # last non-empty line of its stdout+stderr, for a one-line failure report
+    output_tail: str  # last non-empty line of its stderr (else stdout), for a one-line failure report
     # Clock ticks of the whole machine while it ran (all CPUs): (stolen by the hypervisor, all). None where
     # /proc/stat is not available.
     machine_ticks: tuple[int, int] | None = None
@@ -134,15 +134,19 @@ def steal_share(ticks: tuple[int, int] | None) -> float | None:
 
 
 def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun:
-    """Run a command to its end and measure it: wall and CPU seconds, and peak RSS from its wait4 rusage."""
+    """Run a command to its end and measure it: wall and CPU seconds, and peak RSS from its wait4 rusage.
+
+    stdout and stderr go to separate files: written to one file, a child's block-buffered stdout (any program
+    whose stdout is not a terminal) lands after the error it wrote unbuffered to stderr, so "the last line"
+    would depend on buffering. The one-line report is the last line of stderr, else of stdout."""
     with tempfile.TemporaryDirectory(prefix="ffviz-bench-") as tmp:
         report = Path(tmp) / "rusage"
-        log_path = Path(tmp) / "log"
-        with log_path.open("wb") as log:  # a file, not a pipe: nobody reads while the child runs
+        out_path, err_path = Path(tmp) / "stdout", Path(tmp) / "stderr"
+        with out_path.open("wb") as out, err_path.open("wb") as err:  # files, not pipes: nobody reads meanwhile
             ticks_before = machine_ticks()
             # Own session: Ctrl-C reaches only this process, which then ends the launcher and command together.
-            child = subprocess.Popen(measured_argv(command, report), stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd=cwd,
-                                     start_new_session=True)
+            child = subprocess.Popen(measured_argv(command, report), stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                                     cwd=cwd, start_new_session=True)
             try:
                 returncode = child.wait()
             except BaseException:
@@ -150,13 +154,18 @@ def run_measured(command: Sequence[str], *, cwd: Path | None = None) -> ChildRun
                 child.wait()
                 raise
             ticks = ticks_between(ticks_before, machine_ticks())
-        text = log_path.read_text("utf-8", "replace")
+        stdout, stderr = (path.read_text("utf-8", "replace") for path in (out_path, err_path))
         if not report.is_file():  # the launcher itself failed
-            raise RuntimeError(f"measuring launcher failed (exit {returncode}): {text.strip()[-300:]}")
+            raise RuntimeError(f"measuring launcher failed (exit {returncode}): {(stdout + stderr).strip()[-300:]}")
         seconds, cpu_seconds, peak = read_measurement(report)
-    lines = [line.strip() for line in text.replace("\r", "\n").splitlines() if line.strip()]
+    tail = _last_line(stderr) or _last_line(stdout)
     return ChildRun(seconds=seconds, cpu_seconds=cpu_seconds, peak_rss_bytes=peak, returncode=returncode,
-                    output_tail=lines[-1] if lines else "", machine_ticks=ticks)
+                    output_tail=tail, machine_ticks=ticks)
+
+
+def _last_line(text: str) -> str:
+    lines = [line.strip() for line in text.replace("\r", "\n").splitlines() if line.strip()]
+    return lines[-1] if lines else ""
 
 
 # -- methods -------------------------------------------------------------------------------------------------
