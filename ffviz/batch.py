@@ -265,10 +265,13 @@ def run_batch(jobs_list: Sequence[VideoJob], *, jobs: int | None = None, segment
 
 # -- CLI ----------------------------------------------------------------------------------------------------
 
-def add_parser(commands: Any, add_stabilize_options: Callable[[argparse.ArgumentParser], None]) -> None:
+def add_parser(commands: Any, add_stabilize_options: Callable[..., None]) -> None:
     p = commands.add_parser("batch", help="stabilize many videos (or one long one in segments) on Ray")
-    p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT", help="video files or folders of them")
-    p.add_argument("-o", "--output-dir", type=Path, required=True, help="folder for OUTDIR/<input name>.mp4")
+    p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
+                   help="video files, or folders searched recursively for video files")
+    p.add_argument("--output-dir", type=Path, default=None, metavar="OUTDIR",
+                   help="folder for the outputs, OUTDIR/<input name>.mp4, created if missing (required)")
+    p.add_argument("-o", dest="output_dir", type=Path, help=argparse.SUPPRESS)  # the old spelling
     p.add_argument("--address", default=None,
                    help="Ray cluster to use, e.g. ray://head:10001 or auto (default: a local Ray instance)")
     p.add_argument("--jobs", type=int, default=None, metavar="N",
@@ -276,12 +279,14 @@ def add_parser(commands: Any, add_stabilize_options: Callable[[argparse.Argument
     p.add_argument("--segment-frames", type=int, default=0, metavar="N",
                    help="split each video into segments of N frames run in parallel, one video at a time; "
                         "frames identical to a whole-video run (default: 0, one task per video)")
-    add_stabilize_options(p)
+    add_stabilize_options(p, rrd_folder=True)
 
 
 def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: video_io.Encoding) -> list[VideoJob]:
-    inputs = expand_inputs(args.inputs)
     outdir = args.output_dir
+    if outdir is None:
+        raise ConfigError("batch: --output-dir OUTDIR is required (the folder for the outputs)")
+    inputs = expand_inputs(args.inputs)
     if not outdir.is_dir():
         try:
             outdir.mkdir(parents=True)
@@ -338,6 +343,8 @@ def cmd_batch(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: 
     elapsed = time.perf_counter() - started
     print(summary_table(results))
     done = counts["done"]
-    print(f"{done} video(s) in {elapsed:.1f} s ({60 * done / max(elapsed, 1e-9):.1f} videos/min) -> {args.output_dir}")
+    print(f"{done} video(s) stabilized in {elapsed:.1f} s ({60 * done / max(elapsed, 1e-9):.1f} videos/min); "
+          f"outputs in {args.output_dir}/" + (f", recordings in {job_list[0].rrd.parent}/ (ffviz view FILE.rrd)"
+                                              if job_list and job_list[0].rrd is not None else ""))
     failed = [r.exit_code for r in results if r.status == "failed"]
     return max(failed) if failed else 0

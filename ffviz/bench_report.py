@@ -1,11 +1,18 @@
-"""The results of `ffviz bench`: the Markdown table, bench.md/csv/json, the plot and the targets block."""
+"""The results of `ffviz bench`: the Markdown table, bench.md/csv/json, the plot and the targets block, and the
+dated report (docs/benchmarks.md in a source checkout) that says on what machine and versions they were measured."""
 
 from __future__ import annotations
 
 import csv
+import datetime
 import json
+import os
+import platform
+import shutil
 import statistics
+import subprocess
 from dataclasses import asdict, dataclass, field
+from importlib import metadata
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -30,6 +37,7 @@ COLUMNS: tuple[tuple[str, Callable[[BenchRow], object], str], ...] = (
     ("crop", lambda r: r.quality and r.quality.crop, "{:.3f}"),
     ("distort", lambda r: r.quality and r.quality.distort, "{:.3f}"),
     ("black", lambda r: r.quality and r.quality.black, "{:.4f}"),
+    ("flicker", lambda r: r.quality and r.quality.flicker, "{:.2f}"),
     ("note", lambda r: r.error or None, "{}"),
 )
 HEADER = ("| " + " | ".join(name for name, _, _ in COLUMNS) + " |\n"
@@ -68,7 +76,8 @@ def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
         f"{seconds_note}; fps = input frames / seconds; cpu_s = user + system seconds; "
         "steal_pct = share of the machine's CPU time the hypervisor took during the run (median); "
         "peak_MiB = the method's peak RSS (wait4); codec, kbit_s = what it wrote (file size over duration); "
-        "quality from pipeline.metrics.compare against the input.",
+        "quality from pipeline.metrics.compare against the input; flicker = frame-to-frame change of the "
+        "synthesized pixels over that of the real ones (synth_flicker_ratio; - without synthesized pixels).",
         f"{run.cpus} CPUs; load average {run.load_before[0]:.1f} at the start, {run.load_after[0]:.1f} at the end.",
         *run.notes, "", *targets(rows), ""]))
     with table_csv.open("w", newline="") as f:
@@ -77,12 +86,99 @@ def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
         writer.writerows(_flat(r) for r in rows)
     table_json.write_text(json.dumps({
         "run": asdict(run),
+        "machine": machine_info(),
         "rows": [{**_flat(r), "seconds_runs": r.seconds_runs, "cpu_seconds_runs": r.cpu_seconds_runs,
                   "steal_runs": r.steal_runs,
                   "peak_rss_bytes": r.peak_rss_bytes} for r in rows],
     }, indent=2))
     plot(rows, png)
     return [md, table_csv, table_json, png]
+
+
+# -- the report ----------------------------------------------------------------------------------------------
+
+PACKAGES = ("ffviz", "numpy", "scipy", "opencv-python-headless", "av", "numba", "rerun-sdk", "scikit-image")
+
+
+def cpu_model(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The CPU's model name (Linux /proc/cpuinfo), else what platform knows."""
+    try:
+        for line in cpuinfo.read_text().splitlines():
+            if line.lower().startswith("model name") and ":" in line:
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def machine_info() -> dict[str, str]:
+    """What the figures depend on besides the code: CPU, cores, memory, OS, Python and the key packages."""
+    info = {"cpu": cpu_model(), "cores": str(os.cpu_count() or "?"), "os": platform.platform(),
+            "python": platform.python_version()}
+    try:
+        pages, page_size = os.sysconf("SC_PHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
+        info["memory"] = f"{pages * page_size / 2**30:.1f} GiB"
+    except (ValueError, OSError, AttributeError):
+        pass
+    for name in PACKAGES:
+        try:
+            info[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            info[name] = "not installed"
+    ffmpeg = shutil.which("ffmpeg")
+    if ffmpeg:
+        try:
+            first = subprocess.run([ffmpeg, "-version"], capture_output=True, text=True, timeout=10).stdout
+            info["ffmpeg (peers)"] = first.split("\n", 1)[0].removeprefix("ffmpeg version ").split(" Copyright")[0]
+        except (OSError, subprocess.SubprocessError):
+            pass
+    return info
+
+
+def write_report(rows: Sequence[BenchRow], path: Path, run: RunInfo, *, clips: Sequence[Path] = (),
+                 now: datetime.datetime | None = None) -> list[Path]:
+    """The dated Markdown report at ``path`` and its plot beside it (same name, .png); returns both paths."""
+    now = now or datetime.datetime.now().astimezone()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    png = path.with_suffix(".png")
+    plot(rows, png)
+    machine = machine_info()
+    seconds_note = f"median seconds of {run.repeat} runs" if run.repeat > 1 else "seconds of one run"
+    lines = [
+        "# Benchmarks",
+        "",
+        f"Written by `ffviz bench` on {now:%Y-%m-%d %H:%M %Z}; every run of `./run bench` (or `ffviz bench`) "
+        "replaces this file. How the benchmark measures: [benchmarking.md](benchmarking.md); earlier measured "
+        "figures: [benchmarks-history.md](benchmarks-history.md).",
+        "",
+        "## Machine",
+        "",
+        "| | |",
+        "|---|---|",
+        *(f"| {key} | {value} |" for key, value in machine.items()),
+        f"| load average | {run.load_before[0]:.1f} at the start, {run.load_after[0]:.1f} at the end |",
+        "",
+        "## Results",
+        "",
+        f"Clips: {', '.join(c.name for c in clips) or '-'}. {seconds_note.capitalize()} per clip and method.",
+        "",
+        HEADER, *map(markdown_line, rows), "",
+        "fps = input frames / seconds; cpu_s = user + system seconds; steal_pct = share of the machine's CPU time "
+        "the hypervisor took during the run (median); peak_MiB = the method's peak RSS (wait4); codec, kbit_s = what "
+        "it wrote (file size over duration); quality from pipeline.metrics.compare against the input.",
+        *(f"- {note}" for note in run.notes),
+        "",
+        f"![speed against steadiness, frames/s and peak memory]({png.name})",
+        "",
+        "## Targets",
+        "",
+        "```",
+        *targets(rows),
+        "```",
+        "",
+    ]
+    path.write_text("\n".join(lines))
+    return [path, png]
 
 
 # -- targets -------------------------------------------------------------------------------------------------

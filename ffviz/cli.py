@@ -1,4 +1,4 @@
-"""The `ffviz` command: a thin layer over pipeline/ and the recorder.
+"""ffviz: full-frame video stabilization (Matsushita et al. 2006) that records every step for the Rerun viewer.
 
 Expected failures (pipeline.errors.FFVizError) print one line and exit non-zero; Ctrl-C and SIGTERM
 leave no partial output (writers abort on any exception) and exit 130/143.
@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shlex
+import shutil
 import signal
 import sys
 import traceback
@@ -31,40 +34,109 @@ def _on_sigterm(signum, frame) -> None:
     raise Terminated()
 
 
+DESCRIPTION = """\
+ffviz turns a shaky video into a steady one of the same size: no crop, no black borders (Matsushita et al.
+2006: motion smoothing, full-frame completion from neighbouring frames, deblurring). With --rrd it records
+every step (motion, trajectories, masks, flow, each stage of chosen frames) to a Rerun recording (.rrd)
+that `ffviz view` opens.
+
+Start with `ffviz demo`, then `ffviz stabilize INPUT -o OUTPUT.mp4 --rrd`. `ffviz COMMAND --help` for more.
+Output paths: -o/--output names a file, --output-dir a folder."""
+
+STABILIZE_EXAMPLES = """\
+examples:
+  ffviz stabilize shaky.mp4 -o steady.mp4
+      full-frame output (the default --mode full), H.264, audio copied
+  ffviz stabilize shaky.mp4 -o steady.mp4 --rrd
+      also record every step to recordings/shaky.rrd; then: ffviz view recordings/shaky.rrd
+  ffviz stabilize shaky.mp4 -o steady.mp4 --mode crop -k 15
+      faster: crop to the area valid in every frame, with lighter smoothing
+  ffviz stabilize shaky.mp4 -o steady.mp4 --rrd runs/a.rrd --frames 10,40
+      record to runs/a.rrd and follow frames 10 and 40 through every stage
+  ffviz stabilize big.mov -o steady.mp4 --codec mpeg4 --workers 1
+      cheaper encoder, one thread
+
+exit status: 0 done, 2 bad input or option, 3 output problem, 130 interrupted, 143 terminated."""
+
+
+def _deprecated(parser: argparse.ArgumentParser, old: str, new: str, **kwargs) -> None:
+    """An old spelling that still works, hidden from --help; it warns once used."""
+    parser.add_argument(old, help=argparse.SUPPRESS, action=_DeprecatedAlias, new=new, **kwargs)
+
+
+class _DeprecatedAlias(argparse.Action):
+    def __init__(self, *args, new: str, **kwargs) -> None:
+        self.new = new
+        super().__init__(*args, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        print(f"ffviz: warning: {option_string} is deprecated here; use {self.new}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="ffviz", description=__doc__.splitlines()[0])
-    parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
+    parser = argparse.ArgumentParser(prog="ffviz", description=DESCRIPTION,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = commands.add_parser("stabilize", help="stabilize a video")
-    p.add_argument("input", type=Path)
-    p.add_argument("-o", "--output", type=Path, required=True, help="output video (.mp4, .mov or .mkv)")
+    p = commands.add_parser("stabilize", help="stabilize a video", description="Stabilize a video file.",
+                            epilog=STABILIZE_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("input", type=Path, metavar="INPUT",
+                   help="video to stabilize (any container and codec FFmpeg reads: .mp4, .mov, .mkv, .avi, ...)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="OUTPUT",
+                   help="video file to write: .mp4, .mov or .mkv (same frame count, rate and timestamps; audio copied)")
     _add_stabilize_options(p)
-    p.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
+    p.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (default: refuse)")
 
-    p = commands.add_parser("demo", help="generate a synthetic shaky video with ground truth and stabilize it")
-    p.add_argument("-o", "--output-dir", type=Path, default=Path("ffviz-demo"), help="where to write (default: %(default)s)")
-    p.add_argument("--frames", type=int, default=120, help="number of frames to generate (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
-    _add_stabilize_options(p, default_rrd=DEFAULT_RECORDINGS / "demo.rrd")
+    p = commands.add_parser("demo", help="make a synthetic shaky video with known camera motion, stabilize it, "
+                                         "check against the truth",
+                            description="Generate a synthetic shaky video with known camera motion (no input "
+                                        "needed), stabilize it with a recording, and compare the estimated motion "
+                                        "with the truth.")
+    p.add_argument("--output-dir", type=Path, default=Path("ffviz-demo"), metavar="DIR",
+                   help="folder for the input and stabilized videos (default: %(default)s)")
+    _deprecated(p, "-o", "--output-dir", dest="output_dir", type=Path)
+    p.add_argument("--num-frames", type=int, default=120, metavar="N",
+                   help="length of the synthetic video, in frames at 30 frames/s (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the synthetic camera shake and scene; the same seed gives the same video "
+                        "(default: %(default)s)")
+    _add_stabilize_options(p, rrd_default=DEFAULT_RECORDINGS / "demo.rrd")
 
-    p = commands.add_parser("metrics", help="stabilization metrics of OUTPUT against INPUT (Liu et al. 2013)")
-    p.add_argument("input", type=Path)
-    p.add_argument("output", type=Path)
-    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p = commands.add_parser("metrics", help="how steady OUTPUT is compared with INPUT (Liu et al. 2013 + residual "
+                                            "jitter)",
+                            description="Stabilization measures of OUTPUT against INPUT: residual jitter, "
+                                        "stability, cropping ratio, distortion, black pixels (docs/metrics.md).")
+    p.add_argument("input", type=Path, metavar="INPUT", help="the original (shaky) video")
+    p.add_argument("output", type=Path, metavar="OUTPUT",
+                   help="the stabilized video, with the same number of frames as INPUT")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table (default: a table)")
 
-    p = commands.add_parser("view", help="open a recording in the Rerun viewer (web viewer on 127.0.0.1)")
-    p.add_argument("recording", type=Path)
-    p.add_argument("--native", action="store_true", help="use the desktop viewer instead of the web viewer")
-    p.add_argument("--web-port", type=int, default=9090)
-    p.add_argument("--grpc-port", type=int, default=9876)
+    p = commands.add_parser("view", help="open a recording (.rrd) in the Rerun viewer",
+                            description="Serve a recording to Rerun's web viewer on 127.0.0.1 (offline; open the "
+                                        "printed URL in a browser) or open it in the desktop viewer. Ctrl-C stops.")
+    p.add_argument("recording", type=Path, metavar="RECORDING", help="a .rrd file written by ffviz")
+    p.add_argument("--native", action="store_true",
+                   help="open the desktop viewer instead of serving the web viewer (needs a display)")
+    p.add_argument("--web-port", type=int, default=9090, metavar="PORT",
+                   help="TCP port of the web viewer page on 127.0.0.1 (default: %(default)s)")
+    p.add_argument("--grpc-port", type=int, default=9876, metavar="PORT",
+                   help="TCP port on 127.0.0.1 from which the page streams the recording (default: %(default)s)")
 
-    p = commands.add_parser("figures", help="render the thesis-style figures from a recording (PNG, PDF or SVG)")
-    p.add_argument("recording", type=Path)
-    p.add_argument("-o", "--output-dir", type=Path, required=True, help="directory to write the figures to")
-    p.add_argument("--format", choices=("png", "pdf", "svg"), default="png", help="(default: %(default)s)")
+    p = commands.add_parser("figures", help="render the thesis-style figures from a recording (PNG, PDF or SVG)",
+                            description="Render figures (trajectories, stabilized vs original, completion, motion "
+                                        "inpainting, deblurring, blurriness, mosaic variance) from a recording "
+                                        "alone. A figure the recording lacks data for is skipped with a note.")
+    p.add_argument("recording", type=Path, metavar="RECORDING", help="a .rrd file written by ffviz")
+    p.add_argument("--output-dir", type=Path, default=None, metavar="DIR",
+                   help="folder to write the figures to, created if missing (required)")
+    _deprecated(p, "-o", "--output-dir", dest="output_dir", type=Path)
+    p.add_argument("--format", choices=("png", "pdf", "svg"), default="png",
+                   help="file format of the figures (default: %(default)s)")
     p.add_argument("--frames", type=_frame_list, default=None, metavar="T1,T2,...",
-                   help="frames to show in the frame comparisons (default: the traced frames, else a few spread out)")
+                   help="frame numbers (from 0) to show in the frame comparisons (default: the frames the "
+                        "recording traced, else a few spread over the video)")
 
     from ffviz.batch import add_parser as add_batch_parser  # imports no Ray: that happens when a batch runs
 
@@ -84,32 +156,50 @@ def _frame_list(text: str) -> tuple[int, ...] | None:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
-def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None = None) -> None:
+def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None = None, *,
+                           rrd_folder: bool = False) -> None:
+    """The options of one stabilization, shared by stabilize, demo and batch. ``rrd_folder``: --rrd names a
+    folder of recordings, one per video (batch)."""
     p.add_argument("--mode", choices=stab.OUTPUT_MODES, default="full",
                    help="full: missing areas completed from neighbouring frames (full frame, no crop); "
                         "crop: largest window valid in every frame, scaled back to full size; "
                         "none: missing areas left black (default: %(default)s)")
     p.add_argument("--smoothing-radius", "-k", type=int, default=smoothing.DEFAULT_RADIUS, metavar="K",
-                   help="neighbours on each side in the Gaussian of eq. 18 (default: %(default)s)")
+                   help="smoothing radius: frames on each side averaged into each frame's camera path (eq. 18); "
+                        "larger is steadier but needs more completion or crop (default: %(default)s)")
     p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
-                   help="Gaussian sigma in frames (default: sqrt(K))")
-    p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine")
+                   help="width of that Gaussian, in frames (default: sqrt(K))")
+    p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
+                   help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "
+                        "shear) or homography (also perspective) (default: %(default)s)")
     p.add_argument("--refine", choices=motion.REFINEMENTS, default="none",
-                   help="ecc: hierarchical coarse-to-fine direct refinement of each estimate (slower)")
+                   help="ecc: refine each motion estimate by hierarchical coarse-to-fine direct alignment "
+                        "(slower) (default: %(default)s)")
     p.add_argument("--no-deblur", dest="deblur", action="store_false",
                    help="leave motion-blurred frames as they are (default: sharpen them with the pixels of sharper "
                         "neighbouring frames, thesis ch. 5)")
     p.add_argument("--deblur-alpha", type=float, default=deblur.DEBLUR_ALPHA, metavar="ALPHA",
                    help="eq. 31 sensitivity to the alignment error, in intensity levels 0-255: larger lets "
                         "less well aligned neighbours contribute more (default: %(default)s)")
-    p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=default_rrd, metavar="PATH",
-                   help="write a Rerun recording (default place: recordings/<input name>.rrd)")
+    if rrd_folder:
+        p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=rrd_default, metavar="DIR",
+                       help="write one Rerun recording per video, DIR/<input name>.rrd; --rrd alone: "
+                            "OUTDIR/recordings/ (default: no recordings)")
+    else:
+        p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=rrd_default, metavar="FILE",
+                       help="also write a Rerun recording of every step to FILE; --rrd alone: "
+                            "recordings/<input name>.rrd (default: %s)"
+                            % (rrd_default if rrd_default is not None else "no recording"))
     p.add_argument("--record", choices=("summary", "full"), default="full",
-                   help="recording detail: summary (series, output frames) or full (every intermediate)")
-    p.add_argument("--lossless", action="store_true", help="record images losslessly instead of JPEG")
-    p.add_argument("--trace-frames", type=_frame_list, default=None, metavar="T1,T2,...",
-                   help="frames to step through every stage in the recording (timelines 'stage' and 'fmm_step'); "
-                        "'none' for none (default: 3 frames with missing area at --record full, none at summary)")
+                   help="recording detail: summary (series and output frames) or full (every intermediate) "
+                        "(default: %(default)s)")
+    p.add_argument("--lossless", action="store_true",
+                   help="record images losslessly (larger files) (default: JPEG at quality 80)")
+    p.add_argument("--frames", type=_frame_list, default=None, metavar="T1,T2,...",
+                   help="frame numbers (from 0) to follow through every stage in the recording (timelines 'stage' "
+                        "and 'fmm_step'), or 'none' (default: 3 frames with missing area at --record full, none "
+                        "at summary)")
+    _deprecated(p, "--trace-frames", "--frames", dest="frames", type=_frame_list)
     p.add_argument("--codec", choices=video_io.VIDEO_CODECS, default="h264",
                    help="output video: h264 (x264; --crf, --preset) or mpeg4 (MPEG-4 Part 2, what OpenCV's XVID "
                         "writer uses; --qscale): a tenth of x264's CPU for about twice the bits (default: %(default)s)")
@@ -121,7 +211,8 @@ def _add_stabilize_options(p: argparse.ArgumentParser, default_rrd: Path | None 
     p.add_argument("--qscale", type=int, default=None,
                    help="mpeg4 quantiser, 2-31 (lower is better; default: %d)" % video_io.Encoding.qscale)
     p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
-                   help="frames processed at once, on threads (default: one per CPU core); the frames written are the same")
+                   help="frames processed at once, on threads; the frames written are the same for any N "
+                        "(default: one per CPU core, here %d)" % (os.cpu_count() or 1))
 
 
 MAX_RADIUS = 100_000  # frames; the smoothing kernel is allocated at 2k+1 taps
@@ -177,8 +268,33 @@ def _recording_path(args: argparse.Namespace, input_path: Path) -> Path | None:
     return args.rrd
 
 
+def view_command(recording: Path) -> str:
+    """A command that opens ``recording``, runnable as printed in the shell the user started ffviz from.
+
+    Under ./run (which exports FFVIZ_LAUNCHER, the script as the user typed it, and FFVIZ_USER_CWD): that script's
+    `view` verb and the path from the user's folder. Otherwise `ffviz` when the one on PATH is this one, else the
+    path of the script that is running (e.g. .venv/bin/ffviz), else `python -m ffviz.cli`."""
+    launcher, user_cwd = os.environ.get("FFVIZ_LAUNCHER"), os.environ.get("FFVIZ_USER_CWD")
+    if launcher and user_cwd:
+        return f"{shlex.quote(launcher)} view {shlex.quote(os.path.relpath(recording.absolute(), user_cwd))}"
+    script = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
+    if script is not None and script.name == "ffviz" and script.is_file():
+        on_path = shutil.which("ffviz")
+        if on_path is not None and Path(on_path).resolve() == script.resolve():
+            program = "ffviz"
+        else:
+            relative = os.path.relpath(script.absolute())
+            program = shlex.quote(relative if relative.startswith("../") is False and "/" in relative
+                                  else str(script.absolute()))
+    else:
+        program = f"{shlex.quote(sys.executable)} -m ffviz.cli"
+    return f"{program} view {shlex.quote(str(recording))}"
+
+
 def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace, *, overwrite: bool,
-                  observers: Sequence[Observer] = ()) -> stab.StabilizeReport:
+                  observers: Sequence[Observer] = (), final_line: bool = True) -> stab.StabilizeReport:
+    """Stabilize with the CLI's options and print the report; ``final_line``: end with what was written where
+    and how to look at it (the demo prints its own)."""
     from ffviz.progress import tqdm_progress
 
     config = _stabilize_config(args)
@@ -189,7 +305,7 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
         from ffviz.recorder import RerunRecorder
 
         recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80,
-                                 trace_frames=args.trace_frames)
+                                 trace_frames=args.frames)
     try:
         report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
                                 progress=tqdm_progress, overwrite=overwrite, encoding=encoding,
@@ -199,7 +315,20 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
             recorder.abort()
         raise
     _print_report(report, rrd_path)
+    if final_line:
+        print(written_line([(report.output_path, "stabilized video")], rrd_path), flush=True)
     return report
+
+
+def written_line(files: Sequence[tuple[Path, str]], rrd_path: Path | None) -> str:
+    """The last line of a run: what was written where, and how to look at it."""
+    what = [f"{path} ({label})" for path, label in files]
+    if rrd_path is not None:
+        what.append(f"{rrd_path} (recording)")
+        look = f"to look inside: {view_command(rrd_path)}"
+    else:
+        look = "play it in any video player (add --rrd to record every step for the viewer)"
+    return f"wrote {', '.join(what[:-1]) + ' and ' + what[-1] if len(what) > 1 else what[0]}; {look}"
 
 
 def _print_report(report: stab.StabilizeReport, rrd_path: Path | None) -> None:
@@ -211,9 +340,7 @@ def _print_report(report: stab.StabilizeReport, rrd_path: Path | None) -> None:
         lines.append(f"scene cuts at frames {', '.join(map(str, report.cuts))}")
     if report.warnings:
         lines.append(f"{len(report.warnings)} warning(s), listed on stderr")
-    if rrd_path is not None:
-        lines.append(f"recording: {rrd_path}  (open with: ffviz view {rrd_path})")
-    print("\n".join(lines))
+    print("\n".join(lines), flush=True)
     _print_warnings(report.warnings)
 
 
@@ -236,9 +363,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_metrics(args: argparse.Namespace) -> int:
+    from ffviz.progress import tqdm_callback
     from pipeline import metrics
 
-    result = metrics.compare(args.input, args.output)
+    progress, close = tqdm_callback("measuring both videos")
+    try:
+        result = metrics.compare(args.input, args.output, progress=progress)
+    finally:
+        close()
     data = result.to_dict()
     if args.json:
         print(json.dumps(data, indent=2))
@@ -252,6 +384,8 @@ def cmd_metrics(args: argparse.Namespace) -> int:
     for key, label in (("cropping_ratio", "cropping ratio"), ("distortion", "distortion (worst frame)"),
                        ("black_fraction", "black pixels (fraction)")):
         rows.append((label, "", f"{data[key]:.3f}"))
+    flicker = data["synth_flicker_ratio"]  # None when no frame has synthesized pixels (crop)
+    rows.append(("synthesized-pixel flicker (x real)", "", "-" if flicker is None else f"{flicker:.3f}"))
     width = max(len(r[0]) for r in rows)
     print("\n".join(f"{a:<{width}}  {b:>8}  {c:>8}" for a, b, c in rows))
     return 0
@@ -266,7 +400,11 @@ def cmd_view(args: argparse.Namespace) -> int:
 def cmd_figures(args: argparse.Namespace) -> int:
     from ffviz.figures import render_figures
 
-    render_figures(args.recording, args.output_dir, fmt=args.format, frames=args.frames)
+    if args.output_dir is None:
+        raise ConfigError("figures: --output-dir DIR is required (the folder to write the figures to)")
+    written = render_figures(args.recording, args.output_dir, fmt=args.format, frames=args.frames)
+    print(f"wrote {len(written)} figure(s) to {args.output_dir}/" if written else
+          f"no figure written: {args.recording} lacks the data for every figure")
     return 0
 
 

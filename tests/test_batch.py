@@ -77,7 +77,7 @@ def test_rerun_skips_complete_outputs_and_redoes_changed_settings(batch_run, cap
     assert not any(batch.is_complete(job) for job in changed)
     # The CLI over the same folder (Ray already up): summary table, failure's exit code.
     outdir = jobs[0].output.parent
-    code = cli.main(["batch", str(jobs[0].input.parent), "-o", str(outdir), "--mode", "crop", "--jobs", "2"])
+    code = cli.main(["batch", str(jobs[0].input.parent), "--output-dir", str(outdir), "--mode", "crop", "--jobs", "2"])
     out = capsys.readouterr().out
     assert code == 2
     assert "0 done, 3 skipped (already complete), 1 failed" in out

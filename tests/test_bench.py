@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import shutil
 import sys
 from collections import Counter
@@ -34,7 +35,7 @@ def tiny_clip(tmp_path_factory):
 def bench_run(tiny_clip, tmp_path_factory):
     out = tmp_path_factory.mktemp("bench-out")
     code = main(["bench", str(tiny_clip), "--modes", "crop,none,none-mpeg4", "--peers", "vidstab,deshake,opencv,x264",
-                 "--out", str(out)])
+                 "--output-dir", str(out), "-o", str(out / "report" / "benchmarks.md")])
     assert code == 0
     rows = {row["method"]: row for row in json.loads((out / "bench.json").read_text())["rows"]}
     return out, rows
@@ -50,6 +51,37 @@ def test_writes_table_files_and_plot(bench_run):
         assert [r["method"] for r in csv.DictReader(f)] == list(rows)
     png = (out / "bench.png").read_bytes()
     assert png.startswith(b"\x89PNG") and len(png) > 10_000
+
+
+def test_writes_a_dated_report_with_the_machine(bench_run):
+    out, rows = bench_run
+    report = (out / "report" / "benchmarks.md").read_text()
+    assert report.startswith("# Benchmarks\n")
+    assert re.search(r"Written by `ffviz bench` on 20\d\d-\d\d-\d\d \d\d:\d\d", report)
+    for key in ("| cpu |", "| cores |", "| python |", "| numpy |", "| rerun-sdk |", "| opencv-python-headless |"):
+        assert key in report
+    assert "Clips: tiny.mp4." in report and "| tiny.mp4 | ffviz crop |" in report
+    assert "targets (from this table" in report and "![speed against steadiness" in report
+    assert (out / "report" / "benchmarks.png").read_bytes().startswith(b"\x89PNG")
+    assert json.loads((out / "bench.json").read_text())["machine"]["cores"] == str(os.cpu_count())
+
+
+def test_report_defaults_to_docs_in_a_checkout_only(tmp_path):
+    from ffviz.cli import build_parser
+
+    args = build_parser().parse_args(["bench"])
+    assert args.output is None and args.output_dir == bench.DEFAULT_OUT  # cmd_bench picks docs/ or DIR/
+    assert bench.DEFAULT_REPORT == bench.REPO / "docs" / "benchmarks.md"
+    assert build_parser().parse_args(["bench", "--out", str(tmp_path)]).output_dir == tmp_path  # the old spelling
+
+
+def test_cpu_model_from_proc_cpuinfo(tmp_path):
+    from ffviz.bench_report import cpu_model
+
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: X\nmodel name\t: Test CPU 3000 @ 2.0GHz\n")
+    assert cpu_model(info) == "Test CPU 3000 @ 2.0GHz"
+    assert cpu_model(tmp_path / "absent")  # falls back to something, never empty
 
 
 def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
@@ -96,15 +128,16 @@ def test_installed_peers_get_rows(bench_run):
 
 def test_missing_video_is_one_line_error(tmp_path, capsys):
     code = main(["bench", str(tmp_path / "absent.mp4"), "--modes", "none", "--peers", "none",
-                 "--out", str(tmp_path / "out")])
+                 "--output-dir", str(tmp_path / "out"), "-o", str(tmp_path / "report.md")])
     err = capsys.readouterr().err
     assert code == 2
     assert err.strip().splitlines() == [f"ffviz: error: input file not found: {tmp_path / 'absent.mp4'}"]
-    assert not (tmp_path / "out" / "bench.md").exists()
+    assert not (tmp_path / "out" / "bench.md").exists() and not (tmp_path / "report.md").exists()
 
 
 def test_unknown_peer_is_one_line_error(tiny_clip, tmp_path, capsys):
-    assert main(["bench", str(tiny_clip), "--peers", "vidstab,handbrake", "--out", str(tmp_path)]) == 2
+    assert main(["bench", str(tiny_clip), "--peers", "vidstab,handbrake", "--output-dir", str(tmp_path),
+                 "-o", str(tmp_path / "report.md")]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
         "ffviz: error: --peers: unknown handbrake (choose from vidstab, deshake, opencv, x264)"]
 

@@ -80,7 +80,7 @@ def test_every_figure_is_written_with_its_panels(full_recording, tmp_path, capsy
     expected = expected_panels(deblurred)
     assert set(expected) == set(figures.FIGURES)
     out = tmp_path / "png"
-    assert cli.main(["figures", str(rrd), "-o", str(out), "--frames", ",".join(map(str, FRAMES))]) == 0
+    assert cli.main(["figures", str(rrd), "--output-dir", str(out), "--frames", ",".join(map(str, FRAMES))]) == 0
     printed = capsys.readouterr().out
     assert "skipped" not in printed
     for name in expected:
@@ -109,7 +109,7 @@ def test_a_summary_recording_gives_the_trajectories_and_notes_the_rest(tmp_path,
     rrd = tmp_path / "summary.rrd"
     collector = StageCollector("deblur")
     stabilize(clip, None, StabilizeConfig(mode="none"), observer=Observers(RerunRecorder(rrd, level="summary"), collector))
-    assert cli.main(["figures", str(rrd), "-o", str(tmp_path / "out")]) == 0
+    assert cli.main(["figures", str(rrd), "--output-dir", str(tmp_path / "out")]) == 0
     printed = capsys.readouterr().out
     # Series only: the trajectories, and the blurriness when the pipeline deblurred.
     series = {"trajectories"} | ({"blurriness"} if collector.results["deblur"] else set())
@@ -121,6 +121,6 @@ def test_a_summary_recording_gives_the_trajectories_and_notes_the_rest(tmp_path,
 def test_a_file_that_is_not_a_recording_is_one_line_error(tmp_path, capsys):
     bogus = tmp_path / "x.rrd"
     bogus.write_text("hello")
-    assert cli.main(["figures", str(bogus), "-o", str(tmp_path / "out")]) == 2
+    assert cli.main(["figures", str(bogus), "--output-dir", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a Rerun recording" in err[0]

@@ -197,9 +197,14 @@ def test_metrics_cli_reports_less_jitter_after_stabilizing(shaky, tmp_path, caps
 
 def test_demo_runs_and_checks_itself_against_the_ground_truth(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    assert cli.main(["demo", "--frames", "30", "-o", str(tmp_path / "demo")]) == 0
+    monkeypatch.delenv("FFVIZ_LAUNCHER", raising=False)
+    assert cli.main(["demo", "--num-frames", "30", "--output-dir", str(tmp_path / "demo")]) == 0
     printed = capsys.readouterr().out
     assert "median corner error" in printed
+    # The last line: what was written where, and a command that opens the recording as printed.
+    last = printed.strip().splitlines()[-1]
+    assert last.startswith(f"wrote {tmp_path / 'demo' / 'demo_input.mp4'} (shaky input), ")
+    assert last.endswith(f"-m ffviz.cli view recordings/demo.rrd")
     assert (tmp_path / "demo" / "demo_stabilized_full.mp4").is_file()  # full-frame is the default
     assert (tmp_path / "recordings" / "demo.rrd").is_file()
 
