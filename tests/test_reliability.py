@@ -5,7 +5,7 @@ descriptors) for every case, and as a real subprocess for a representative subse
 output-safety cases: an input it refuses gives exactly one line on stderr (no traceback) and a non-zero
 exit; an input it accepts gives an output with the input's frame count and timestamps, and a warning
 where the input was odd. Either way no partial output and no temp file is left, and the input is
-untouched. README.md, "Bad input: what happens", lists the same cases: keep the two in step.
+untouched. docs/bad-input.md lists the same cases: keep the two in step.
 """
 
 from __future__ import annotations

@@ -188,7 +188,7 @@ def test_metrics_cli_reports_less_jitter_after_stabilizing(shaky, tmp_path, caps
     # Measured 0.51-0.71 over 18 runs: sigma = sqrt(30) frames passes about a quarter of the 1.5 Hz end of
     # the jitter band, and the metric counts everything above about 0.3 Hz (including the 0.25 Hz drift's
     # harmonics). The spread is x264's: PyAV's build encodes the same frames slightly differently from run to
-    # run (README, "Using it"), which moves SIFT's pair estimates by ~0.2 px at 320x180. Unstabilized: ~1.0.
+    # run (docs/usage.md), which moves SIFT's pair estimates by ~0.2 px at 320x180. Unstabilized: ~1.0.
     assert report["residual_jitter_px"] < 0.8 * report["input"]["residual_jitter_px"]
     assert 0.5 < report["cropping_ratio"] < 1.0  # crop mode zooms in
     assert report["distortion"] > 0.9  # a similarity-like crop, no shear
