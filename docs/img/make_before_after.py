@@ -56,3 +56,8 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+# docs/img/viewer.jpg was taken from the same demo recording with Rerun's headless native viewer (needs
+# Vulkan: apt-get install mesa-vulkan-drivers): `rerun --headless --bind 127.0.0.1 --port 9878 --window-size
+# 1400x800 recordings/demo.rrd`, then `rerun.experimental.ViewerClient.connect("rerun+http://127.0.0.1:9878/proxy")`,
+# `.set_time("frame", sequence=60)`, wait ~10 s, `.save_screenshot(path)`.
