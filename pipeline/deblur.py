@@ -109,6 +109,13 @@ ERROR_SIGMA_PX = 4.0
 REJECT_ERROR = 32.0
 REJECT_GROW_PX = 8
 MIN_RATIO = 1.1
+# Structure guard (see ``StructureGuard``): a neighbour's pixel is refused where the local structure of the
+# low-passed images disagrees, whatever the colours.
+STRUCTURE_MIN = 0.75
+STRUCTURE_WINDOW_PX = 8  # half-width of the square window the local statistics are taken over (360 rows)
+STRUCTURE_C = 6.5  # (0.01 * 255)^2: the contrast-structure term's stabiliser; flatter than ~2.5 levels of std
+# counts as agreeing (a ghost of flat content on flat content is invisible)
+REFUSED_ERROR = np.float32(1e4)  # what a refused low-res cell's alignment error is set to: far above any threshold
 # Energy maps are kept at this fraction of the frame size: means over large polygons barely change, and
 # masking 16x fewer pixels keeps the per-frame cost of the window's blurriness small.
 ENERGY_SCALE = 0.25
@@ -126,6 +133,8 @@ class DeblurConfig:
     error_sigma_px: float = ERROR_SIGMA_PX  # low-pass of the signed difference before E is taken (0: eq. 29)
     reject_error: float = REJECT_ERROR  # E above this marks another scene (moving object, misregistration)
     reject_grow_px: int = REJECT_GROW_PX  # ... and so does everything this close to such a pixel
+    structure_min: float | None = STRUCTURE_MIN  # refuse where the local structure agreement is below this (None: off)
+    structure_window_px: int = STRUCTURE_WINDOW_PX  # half-width of its window
 
     def __post_init__(self) -> None:
         if not (self.alpha > 0 and math.isfinite(self.alpha)):
@@ -139,6 +148,10 @@ class DeblurConfig:
             raise ValueError("deblur error_sigma_px and reject_grow_px must be >= 0")
         if not self.reject_error > 0:
             raise ValueError(f"deblur reject_error must be positive, not {self.reject_error}")
+        if self.structure_min is not None and not -1.0 <= self.structure_min <= 1.0:
+            raise ValueError(f"deblur structure_min must lie in [-1, 1] or be None, not {self.structure_min}")
+        if self.structure_window_px < 1:
+            raise ValueError(f"deblur structure_window_px must be >= 1, not {self.structure_window_px}")
 
 
 @dataclass(frozen=True)
@@ -149,6 +162,12 @@ class DeblurResult:
     neighbours: tuple[int, ...]  # offsets t'-t of the sharper neighbours that contributed
     weights: np.ndarray  # (H, W) float32 in [0, 1]: share of the output pixel that came from neighbours
     ratios: dict[int, float] = field(default_factory=dict)  # b_t / b_t' of every neighbour compared, by offset
+    # (H, W) int8: offset of the neighbour that gave the pixel the most weight, 0 where none gave any; None
+    # when no neighbour contributed.
+    main_source: np.ndarray | None = None
+    # (H, W) bool: pixels a sharper neighbour covered but was refused at (other content after alignment: a
+    # moving object, parallax, misregistration); None when no neighbour was sharper.
+    refused: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -251,6 +270,55 @@ def alignment_error(target: np.ndarray, neighbour: np.ndarray, valid: np.ndarray
     return error
 
 
+class StructureGuard:
+    """Whether a neighbour shows the same content as frame t after alignment, judged by structure.
+
+    The alignment error E compares low-passed colours, so content of similar colour passes it: a dark coat moving
+    over a dark hedge, or a figure dressed in the background's own colours, would be blended into frame t as a
+    see-through ghost. Here both images are low-passed as for E (intensity, Gaussian of E's sigma: blur by a kernel
+    that sums to 1 leaves what remains nearly unchanged) and compared by the contrast-structure term of SSIM over
+    a square window, (2 cov + C) / (var_t + var_t' + C): near 1 where the same structure shows (sharper or not),
+    near 0 for other content, and 1 where both are flat (nothing to ghost). Cells below ``minimum`` are refused;
+    specks of one cell are dropped first (a 3x3 opening), so that isolated edge cells of a sharp neighbour do not
+    punch holes in the transfer once dilated. Only windows wholly inside the neighbour's coverage are judged.
+
+    Works at the alignment error's resolution (ErrorGrid); the target's statistics are made once per frame.
+    """
+
+    def __init__(self, target_small: np.ndarray, sigma: float, window: int, minimum: float) -> None:
+        self.sigma = sigma
+        self.size = (2 * window + 1, 2 * window + 1)
+        self.minimum = np.float32(minimum)
+        self.target = self._low_passed(target_small)
+        self.target_mean = self._box(self.target)
+        self.target_var = self._box(self.target * self.target) - self.target_mean * self.target_mean
+
+    def _low_passed(self, rgb: np.ndarray) -> np.ndarray:
+        grey = intensity(rgb)
+        return cv2.GaussianBlur(grey, (0, 0), self.sigma) if self.sigma > 0 else grey
+
+    def _box(self, image: np.ndarray) -> np.ndarray:
+        return cv2.boxFilter(image, cv2.CV_32F, self.size, borderType=cv2.BORDER_REFLECT)
+
+    def agreement(self, neighbour_small: np.ndarray) -> np.ndarray:
+        """(h, w) float32: the contrast-structure term at each low-res cell."""
+        other = self._low_passed(neighbour_small)
+        mean = self._box(other)
+        var = self._box(other * other) - mean * mean
+        cov = self._box(self.target * other) - self.target_mean * mean
+        return (2.0 * cov + STRUCTURE_C) / (np.maximum(self.target_var, 0) + np.maximum(var, 0) + STRUCTURE_C)
+
+    def refused(self, neighbour_small: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
+        """bool (h, w) of the refused cells, None when there are none. ``weight``: the neighbour's coverage
+        share of each cell (the alignment error's)."""
+        judged = self._box(weight) >= np.float32(0.999)
+        refused = (self.agreement(neighbour_small) < self.minimum) & judged
+        if not refused.any():
+            return None
+        refused = cv2.morphologyEx(refused.view(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)).view(bool)
+        return refused if refused.any() else None
+
+
 def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[WarpedNeighbour],
            config: DeblurConfig = DeblurConfig(), *, ratios: Mapping[int, float],
            blurriness_t: float = math.nan) -> DeblurResult:
@@ -281,6 +349,9 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
     if sharper:
         grid = kernels.ErrorGrid(target, target_valid, config.error_sigma_px * scale, grow)
         taken = kernels.Contributions(len(sharper), grid, target_valid)
+        guard = None if config.structure_min is None else StructureGuard(
+            grid.target_small, grid.sigma_small, max(round(config.structure_window_px * scale / grid.factor), 1),
+            config.structure_min)
         for n in sharper:
             rgb = taken.next_rgb()
             if not n.warped_whole:
@@ -305,6 +376,9 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
                 continue
             small = rgb if grid.factor == 1 else cv2.resize(rgb, grid.small_size, interpolation=cv2.INTER_AREA)
             error = kernels.low_res_error(grid.target_small, small, weight, grid.sigma_small)
+            refused = None if guard is None else guard.refused(small, weight)
+            if refused is not None:
+                error[refused] = REFUSED_ERROR
             bands = kernels.hot_bands(error, config.reject_error, grid)
             if bands:
                 kernels.fill_rejected(error, config.reject_error, grow, grid, bands, taken.next_rejected())
@@ -313,8 +387,37 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
             frame, weights, counts = kernels.blend(target, *taken.arrays(), *grid.up_tables, alpha)  # eq. 30
             used = tuple(offset for offset, count in zip(taken.offsets, counts) if count > 0)
     if not used:
-        return DeblurResult(target, target, blurriness_t, (), np.zeros((height, width), np.float32), dict(ratios))
-    return DeblurResult(frame, target, blurriness_t, used, weights, dict(ratios))
+        refused = _refused(taken, target_valid) if sharper else None
+        return DeblurResult(target, target, blurriness_t, (), np.zeros((height, width), np.float32), dict(ratios),
+                            refused=refused)
+    return DeblurResult(frame, target, blurriness_t, used, weights, dict(ratios),
+                        main_source=_main_source(taken, grid, alpha, weights), refused=_refused(taken, target_valid))
+
+
+def _refused(taken: kernels.Contributions, target_valid: np.ndarray) -> np.ndarray:
+    """bool (H, W): pixels of the target where at least one sharper neighbour was refused."""
+    if taken.rejected is None or not taken.has_rejected[:taken.count].any():
+        return np.zeros(target_valid.shape, bool)
+    union = np.bitwise_or.reduce(taken.rejected[:taken.count][taken.has_rejected[:taken.count]], axis=0)
+    return union.view(bool) & target_valid
+
+
+def _main_source(taken: kernels.Contributions, grid: kernels.ErrorGrid, alpha: np.float32,
+                 weights: np.ndarray) -> np.ndarray:
+    """(H, W) int8: per pixel, the offset of the neighbour with the largest eq. 31 weight (judged on the
+    alignment error's grid, refused pixels excluded), 0 where neighbours gave under 5 % of the pixel."""
+    count = taken.count
+    small = taken.ratios[:count, None, None] * alpha / (taken.errors[:count] + alpha)
+    best = np.argmax(small, axis=0)
+    offsets = np.asarray(taken.offsets, np.int8)[best]
+    height, width = weights.shape
+    source = cv2.resize(offsets, (width, height), interpolation=cv2.INTER_NEAREST)
+    if taken.rejected is not None:
+        # A refused pixel's own neighbour cannot be its source: fall back to "none" there (rare, at edges).
+        for k in np.flatnonzero(taken.has_rejected[:count]):
+            source[(taken.rejected[k] != 0) & (source == taken.offsets[k])] = 0
+    source[weights < 0.05] = 0
+    return source
 
 
 def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, frames: Mapping[int, np.ndarray],

@@ -4,7 +4,12 @@ A wide "world" canvas (a real photograph from ``skimage.data``, upscaled so that
 generous margin lies inside it) is filmed by a virtual camera whose path is a smooth intentional path (a slow
 pan plus slow sinusoidal drift and roll) with hand-held jitter on top (band-limited random translation, roll
 and zoom). A textured disc (the mission patch from ``skimage.data.astronaut``, with a green rim) moves
-through the world on its own path and is composited into the world before the camera warp. A few frames are
+through the world on its own path and is composited into the world before the camera warp. With
+``object_kind="person"`` the foreground is instead a figure a fifth of the frame wide and over half its height,
+dressed in a texture cut from the world photograph (rotated half a turn, so the same colour statistics as the
+background but other content) and walking 10-25 px a frame with random changes of speed and direction: the
+case where colour alone cannot tell foreground from background, and global alignment is wrong on a large
+area. The background hidden behind the object is kept (``hidden_background``). A few frames are
 motion-blurred with a known linear kernel; their sharp versions are kept.
 
 Coordinate convention (whole project): ``a_from_b`` is a 3x3 homogeneous matrix mapping pixel coordinates in
@@ -85,8 +90,13 @@ class SyntheticConfig:
     drift_hz: float = 0.25  # frequency of the slow drift (well below the jitter band)
     # Moving foreground object.
     moving_object: bool = True
+    # "disc": the mission patch (below); "person": a person-sized figure wearing a texture cut from the world
+    # photograph itself (same colour statistics as the background), walking irregularly across the view.
+    object_kind: str = "disc"
     object_radius_px: float = 40.0
     object_sweep: float = 0.6  # fraction of the frame width its path spans (centred); > 1: enters/leaves through the borders
+    person_size: tuple[float, float] = (0.22, 0.6)  # "person": width, height as fractions of the frame's
+    person_speed_px: tuple[float, float] = (10.0, 25.0)  # "person": per-frame speed range, frame pixels
     # Motion blur.
     blurred_frames: tuple[int, ...] | None = None  # None -> default_blurred_frames(n_frames); () -> none
     blur_length_px: float = 12.0
@@ -142,8 +152,8 @@ class SyntheticVideo:
         """(N, 2) world coordinates of the object's centre (NaN rows when there is no object)."""
         if self.object_world_from_patch is None or self.object_patch is None:
             return np.full((self.n_frames, 2), np.nan)
-        c = (self.object_patch.shape[1] - 1) / 2.0
-        p = self.object_world_from_patch @ np.array([c, c, 1.0])
+        cx, cy = (self.object_patch.shape[1] - 1) / 2.0, (self.object_patch.shape[0] - 1) / 2.0
+        p = self.object_world_from_patch @ np.array([cx, cy, 1.0])
         return p[:, :2] / p[:, 2:3]
 
     @property
@@ -178,6 +188,18 @@ class SyntheticVideo:
         if not sharp and t in self.blurred:
             img = apply_blur(img, self.blur_kernel)
         return img
+
+    def hidden_background(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
+        """What ``render_view(t, view_from_frame)`` would show without the object: the background it hides."""
+        view_from_world = _as3x3(view_from_frame) @ self.frame_from_world[t]
+        return warp(self.world, view_from_world, self.size, interpolation=cv2.INTER_CUBIC)
+
+    def object_view_mask(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
+        """bool (H, W): the object's footprint (coverage >= 0.5) in the view ``view_from_frame`` of frame t."""
+        if self.object_world_from_patch is None or self.object_alpha is None:
+            return np.zeros((self.config.height, self.config.width), bool)
+        view_from_patch = _as3x3(view_from_frame) @ self.frame_from_world[t] @ self.object_world_from_patch[t]
+        return _object_mask(self.object_alpha, view_from_patch, self.config.width, self.config.height)
 
     def view_coverage(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
         """bool (H, W): where ``render_view(t, view_from_frame)`` samples inside the world canvas (true truth)."""
@@ -379,6 +401,61 @@ def _object_texture(world_image: str = "") -> tuple[np.ndarray, np.ndarray]:
     return np.clip(np.round(rgb), 0, 255).astype(np.uint8), alpha
 
 
+def _person_texture(cfg: SyntheticConfig) -> tuple[np.ndarray, np.ndarray]:
+    """A person-sized figure (head on a rounded body, anti-aliased alpha) dressed in a crop of the world
+    photograph rotated half a turn: the background's own colours and texture statistics, other content."""
+    pw = max(int(round(cfg.person_size[0] * cfg.width)), 8)
+    ph = max(int(round(cfg.person_size[1] * cfg.height)), 8)
+    photo = load_image(cfg.image)[::-1, ::-1]
+    # Scale the photograph as the world canvas does (about one photo pixel per frame pixel or more).
+    scale = max(cfg.width / photo.shape[1], cfg.height / photo.shape[0], 1.0) * 1.3
+    photo = cv2.resize(photo, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
+    y0 = max((photo.shape[0] - ph) // 3, 0)
+    x0 = max((photo.shape[1] - pw) // 3, 0)
+    rgb = np.ascontiguousarray(photo[y0:y0 + ph, x0:x0 + pw])
+    if rgb.shape[:2] != (ph, pw):
+        rgb = cv2.resize(rgb, (pw, ph), interpolation=cv2.INTER_CUBIC)
+    yy, xx = np.mgrid[0:ph, 0:pw].astype(np.float32)
+    # Signed distance (px, positive inside) to a head circle over a rounded-rectangle body, then clipped.
+    head_r = 0.28 * pw
+    head = head_r - np.hypot(xx - (pw - 1) / 2.0, yy - head_r - 1.0)
+    corner = 0.3 * pw
+    top, bottom, left, right = 1.7 * head_r, ph - 1.5, 1.5, pw - 2.5
+    qx = np.maximum(np.maximum(left + corner - xx, xx - (right - corner)), 0.0)
+    qy = np.maximum(np.maximum(top + corner - yy, yy - (bottom - corner)), 0.0)
+    inside = np.minimum(np.minimum(xx - left, right - xx), np.minimum(yy - top, bottom - yy))
+    body = np.where((qx > 0) & (qy > 0), corner - np.hypot(qx, qy),
+                    np.minimum(inside, corner - np.maximum(qx, qy)))
+    alpha = np.clip(np.maximum(head, body) + 0.5, 0.0, 1.0).astype(np.float32)
+    return rgb, alpha
+
+
+def _person_path(cfg: SyntheticConfig, patch_shape: tuple[int, ...], view_centre_x: np.ndarray,
+                 world_shift_y: float) -> np.ndarray:
+    """(N, 3, 3) world_from_patch: walking across the intended view at a speed drawn per frame from
+    ``person_speed_px`` (changes of speed, and of direction near the view's sides or at random), with a small
+    vertical bob. Drawn from its own generator so the camera's draws do not depend on it."""
+    rng = np.random.default_rng((cfg.seed, 7919))
+    n, w, h = int(cfg.n_frames), int(cfg.width), int(cfg.height)
+    ph, pw = patch_shape[:2]
+    lo, hi = cfg.person_speed_px
+    limit = max(0.5 * cfg.object_sweep * w, 1.0)  # turns back once its centre is this far from the view's
+    x = rng.uniform(-0.5, 0.5) * limit
+    direction = 1.0 if rng.random() < 0.5 else -1.0
+    offsets = np.empty(n)
+    for i in range(n):
+        offsets[i] = x
+        if abs(x) > limit and np.sign(x) == direction or rng.random() < 0.08:
+            direction = -direction
+        x += direction * rng.uniform(lo, hi)
+    bob = 0.02 * h * np.sin(np.arange(n) * 0.9 + rng.uniform(0, 2 * math.pi))
+    # World coordinates of the intended view's centre are (view_centre_x, world_shift_y), drift aside; the
+    # figure stands a little below it so that its feet reach the lower part of the frame.
+    poses = [_translation(view_centre_x[i] + offsets[i] - (pw - 1) / 2.0,
+                          world_shift_y + 0.12 * h + bob[i] - (ph - 1) / 2.0) for i in range(n)]
+    return np.stack(poses)
+
+
 def _composite(canvas: np.ndarray, patch: np.ndarray, alpha: np.ndarray, world_from_patch: np.ndarray):
     """Alpha-composite the patch into the canvas in place at its pose; returns (y0, y1, x0, x1, saved region)
     so the caller can restore the canvas, or None when the patch misses the canvas."""
@@ -440,6 +517,8 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
     w, h, n, fps = int(cfg.width), int(cfg.height), int(cfg.n_frames), float(cfg.fps)
     if w < 8 or h < 8 or n < 1 or fps <= 0:
         raise ValueError(f"bad synthetic config: {w}x{h}, {n} frames at {fps} fps")
+    if cfg.object_kind not in ("disc", "person"):
+        raise ValueError(f"object_kind must be 'disc' or 'person', not {cfg.object_kind!r}")
     rng = np.random.default_rng(cfg.seed)
     fc = ((w - 1) / 2.0, (h - 1) / 2.0)
     t = np.arange(n, dtype=np.float64)
@@ -473,7 +552,10 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
 
     # Moving object: its own straight path across the (linear part of the) intended view, plus a bob and spin.
     obj_patch = obj_alpha = obj_pose = None
-    if cfg.moving_object:
+    if cfg.moving_object and cfg.object_kind == "person":
+        obj_patch, obj_alpha = _person_texture(cfg)
+        obj_pose = _person_path(cfg, obj_alpha.shape, cfg.pan_px_per_frame * t + shift_x, shift_y)
+    elif cfg.moving_object:
         obj_patch, obj_alpha = _object_texture(cfg.image)
         half = (obj_alpha.shape[0] - 1) / 2.0
         k = cfg.object_radius_px / _PATCH_RADIUS
