@@ -424,6 +424,10 @@ COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics
             "figures": cmd_figures, "batch": cmd_batch, "bench": cmd_bench}
 
 
+def _nothing_written(args: argparse.Namespace) -> str:
+    return "" if args.command in ("view", "metrics") else "; no output written"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _on_sigterm)
@@ -433,10 +437,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"ffviz: error: {error}", file=sys.stderr)
         return error.exit_code
     except KeyboardInterrupt:
-        print("ffviz: interrupted; no output written", file=sys.stderr)
+        print(f"ffviz: interrupted{_nothing_written(args)}", file=sys.stderr)
         return 130
     except Terminated:
-        print("ffviz: terminated; no output written", file=sys.stderr)
+        print(f"ffviz: terminated{_nothing_written(args)}", file=sys.stderr)
         return 143
     except Exception as error:  # noqa: BLE001 - the last line of defence: one line, not a traceback
         if args.debug:
