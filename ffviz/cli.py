@@ -159,7 +159,7 @@ def _frame_list(text: str) -> tuple[int, ...] | None:
 def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None = None, *,
                            rrd_folder: bool = False) -> None:
     """The options of one stabilization, shared by stabilize, demo and batch. ``rrd_folder``: --rrd names a
-    folder of recordings, one per video (batch)."""
+    folder of recordings, one per video, and there is no --workers (batch: one thread per Ray task)."""
     p.add_argument("--mode", choices=stab.OUTPUT_MODES, default="full",
                    help="full: missing areas completed from neighbouring frames (full frame, no crop); "
                         "crop: largest window valid in every frame, scaled back to full size; "
@@ -210,6 +210,8 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "larger files (default: %s)" % video_io.Encoding.preset)
     p.add_argument("--qscale", type=int, default=None,
                    help="mpeg4 quantiser, 2-31 (lower is better; default: %d)" % video_io.Encoding.qscale)
+    if rrd_folder:
+        return
     p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
                    help="frames processed at once, on threads; the frames written are the same for any N "
                         "(default: one per CPU core, here %d)" % (os.cpu_count() or 1))
