@@ -113,8 +113,10 @@ MIN_RATIO = 1.1
 # low-passed images disagrees, whatever the colours.
 STRUCTURE_MIN = 0.75
 STRUCTURE_WINDOW_PX = 8  # half-width of the square window the local statistics are taken over (360 rows)
-STRUCTURE_C = 6.5  # (0.01 * 255)^2: the contrast-structure term's stabiliser; flatter than ~2.5 levels of std
-# counts as agreeing (a ghost of flat content on flat content is invisible)
+STRUCTURE_C = 1.0  # the contrast-structure term's stabiliser: windows flatter than ~1 level of std count as agreeing
+# (a ghost of flat content on flat content is invisible)
+STRUCTURE_SHIFT_MARGIN = 0.05  # refuse where moving the neighbour by one cell agrees better by this much ...
+STRUCTURE_SHIFT_MIN_VAR = np.float32(9.0)  # ... in windows with structure in both images (std >= 3 levels)
 REFUSED_ERROR = np.float32(1e4)  # what a refused low-res cell's alignment error is set to: far above any threshold
 # Energy maps are kept at this fraction of the frame size: means over large polygons barely change, and
 # masking 16x fewer pixels keeps the per-frame cost of the window's blurriness small.
@@ -290,6 +292,9 @@ class StructureGuard:
         self.size = (2 * window + 1, 2 * window + 1)
         self.minimum = np.float32(minimum)
         self.target = self._low_passed(target_small)
+        # Both images are centred on the target's mean: the same covariances, with float32 sums of smaller products.
+        self.offset = np.float32(self.target.mean())
+        self.target -= self.offset
         self.target_mean = self._box(self.target)
         self.target_var = self._box(self.target * self.target) - self.target_mean * self.target_mean
 
@@ -302,17 +307,40 @@ class StructureGuard:
 
     def agreement(self, neighbour_small: np.ndarray) -> np.ndarray:
         """(h, w) float32: the contrast-structure term at each low-res cell."""
-        other = self._low_passed(neighbour_small)
+        return self._agreements(neighbour_small)[0]
+
+    def _agreements(self, neighbour_small: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The contrast-structure term as aligned, and its largest value with the neighbour moved one cell
+        left, right, up or down."""
+        other = self._low_passed(neighbour_small) - self.offset
         mean = self._box(other)
-        var = self._box(other * other) - mean * mean
+        var = np.maximum(self._box(other * other) - mean * mean, 0)
+        target_var = np.maximum(self.target_var, 0)
         cov = self._box(self.target * other) - self.target_mean * mean
-        return (2.0 * cov + STRUCTURE_C) / (np.maximum(self.target_var, 0) + np.maximum(var, 0) + STRUCTURE_C)
+        aligned = (2.0 * cov + STRUCTURE_C) / (target_var + var + STRUCTURE_C)
+        padded = cv2.copyMakeBorder(other, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
+        padded_mean = cv2.copyMakeBorder(mean, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
+        padded_var = cv2.copyMakeBorder(var, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
+        height, width = other.shape
+        moved = np.full_like(aligned, -np.inf)
+        for dy, dx in ((0, 1), (2, 1), (1, 0), (1, 2)):
+            window = (slice(dy, dy + height), slice(dx, dx + width))
+            cov_moved = self._box(self.target * padded[window]) - self.target_mean * padded_mean[window]
+            np.maximum(moved, (2.0 * cov_moved + STRUCTURE_C) / (target_var + padded_var[window] + STRUCTURE_C),
+                       out=moved)
+        # Where either window is flat, a shift changes nothing that shows; at the image's edge the moved windows
+        # would read padding.
+        moved[np.minimum(target_var, var) < STRUCTURE_SHIFT_MIN_VAR] = -np.inf
+        edge = self.size[0] // 2 + 1
+        moved[:edge], moved[-edge:], moved[:, :edge], moved[:, -edge:] = -np.inf, -np.inf, -np.inf, -np.inf
+        return aligned, moved
 
     def refused(self, neighbour_small: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
         """bool (h, w) of the refused cells, None when there are none. ``weight``: the neighbour's coverage
         share of each cell (the alignment error's)."""
         judged = self._box(weight) >= np.float32(0.999)
-        refused = (self.agreement(neighbour_small) < self.minimum) & judged
+        aligned, moved = self._agreements(neighbour_small)
+        refused = ((aligned < self.minimum) | (moved > aligned + STRUCTURE_SHIFT_MARGIN)) & judged
         if not refused.any():
             return None
         refused = cv2.morphologyEx(refused.view(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)).view(bool)

@@ -208,7 +208,9 @@ class DynamicScores:
         ``truth_show_through`` is the same figure for the true frames (chance level).
     blurred_psnr: PSNR over every covered pixel of the blurred frames.
     synthesized_psnr / synthesized_show_through: over completion's synthesized pixels (all frames), against
-        the truth, and inside the object; ``mosaic_telea_psnr``: what OpenCV's CPU chain gives on them.
+        the truth, and inside the object; ``mosaic_telea_psnr``: what OpenCV's CPU chain gives on them;
+        ``synthesized_split_psnr``: both methods' PSNR over the synthesized pixels the object covers in the truth
+        and over the rest (where a stale copy of the object pasted from a neighbour would show).
     """
 
     object_psnr: dict[str, float]
@@ -218,6 +220,7 @@ class DynamicScores:
     synthesized_psnr: float
     mosaic_telea_psnr: float
     synthesized_show_through: float
+    synthesized_split_psnr: dict[str, dict[str, float]]  # method -> {"object", "background"} -> PSNR
     frames: int
     blurred_frames: int
 
@@ -232,6 +235,7 @@ class _DynamicJudge(NullObserver):
         self.blurred = {k: _Pooled() for k in ("deblurred", "not deblurred")}
         self.synthesized = {k: _Pooled() for k in ("ours", "mosaic+telea")}
         self.synthesized_show = _Pooled()
+        self.synthesized_on = {m: {"object": _Pooled(), "background": _Pooled()} for m in self.synthesized}
         self.frames = 0
         self.blurred_frames = 0
         self._warp: dict[int, warping.WarpResult] = {}
@@ -267,11 +271,13 @@ class _DynamicJudge(NullObserver):
             self.show[name].add_correlation(_high_pass(image, sigma), hidden_high, inside)
         synthesized = completed.missing & covered
         if synthesized.any():
-            self.synthesized["ours"].add_error(completed.frame, truth, synthesized)
             mosaic_only = completed.mosaic
             telea = cv2.inpaint(mosaic_only.frame, mosaic_only.remaining.astype(np.uint8), TELEA_RADIUS,
                                 cv2.INPAINT_TELEA)
-            self.synthesized["mosaic+telea"].add_error(telea, truth, synthesized)
+            for name, image in (("ours", completed.frame), ("mosaic+telea", telea)):
+                self.synthesized[name].add_error(image, truth, synthesized)
+                self.synthesized_on[name]["object"].add_error(image, truth, synthesized & inside)
+                self.synthesized_on[name]["background"].add_error(image, truth, synthesized & ~inside)
             self.synthesized_show.add_correlation(_high_pass(completed.frame, sigma), hidden_high,
                                                   synthesized & inside)
 
@@ -284,6 +290,7 @@ class _DynamicJudge(NullObserver):
             synthesized_psnr=self.synthesized["ours"].psnr,
             mosaic_telea_psnr=self.synthesized["mosaic+telea"].psnr,
             synthesized_show_through=self.synthesized_show.correlation,
+            synthesized_split_psnr={m: {k: p.psnr for k, p in parts.items()} for m, parts in self.synthesized_on.items()},
             frames=self.frames,
             blurred_frames=self.blurred_frames,
         )

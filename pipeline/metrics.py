@@ -85,6 +85,21 @@ The high-passed residual ``h = x - lowpass(x)`` gives
 ``residual_jitter_deg = sqrt(mean_t(htheta_t^2))`` in degrees. Motion slower than about a second
 stays in the low-pass; hand shake lands in the residual. Input and output jitter are comparable.
 
+Flicker of synthesized pixels (ours; ``compare``)
+------------------------------------------------
+Output pixels outside input frame t warped into output frame t (the input's outline mapped by
+``H_t``) are *synthesized* (completed from other frames); inside, *real*. A band of ``seam_px`` (2)
+on either side of the outline counts as neither, so an error of ``H_t`` of a pixel or two does not mix
+the classes. Output frame t-1 is warped onto frame t by ``M_t`` (bilinear); the change of a pixel is
+``|O_t - warp(O_{t-1})|`` in grey levels 0-255. Only pixels inside warped frame t-1 count: *real*
+ones are real in both frames, *synthesized* ones are synthesized in either and in neither's seam band
+(a completed pixel that pops when the real content comes back is flicker too). A pair is skipped when
+``M_t``, ``H_t`` or ``H_{t-1}`` failed or when fewer than 0.5 % of the pixels count as synthesized.
+``synth_change_mean`` and ``real_change_mean`` are pooled over the clip's pairs;
+``synth_flicker_ratio`` is their quotient: about 1 when the completed areas are as steady as the
+real picture (both see the same codec noise and alignment error), above when they flicker. NaN when
+no pair has synthesized pixels (a crop), as are the means then.
+
 Failures
 --------
 ``failed_pairs`` of ``StabilizationMetrics`` counts the failed input-output pairs plus the failed
@@ -126,6 +141,8 @@ class MetricsConfig:
     n_features: int = 1000
     min_matches: int = 10  # a pair needs more good matches than this
     black_level: int = 7  # a pixel is black when R, G and B are all <= this ("< 8")
+    seam_px: int = 2  # band on either side of the input's outline that is neither real nor synthesized
+    min_synth_fraction: float = 0.005  # a pair with fewer synthesized pixels is left out of the flicker
 
     def __post_init__(self) -> None:
         if self.feature not in ("sift", "orb"):
@@ -170,6 +187,10 @@ class StabilizationMetrics:
     input: VideoMotionStats
     n_frames: int
     failed_pairs: int
+    synth_flicker_ratio: float = float("nan")  # synth_change_mean / real_change_mean
+    synth_change_mean: float = float("nan")  # mean |O_t - warp(O_{t-1})| over synthesized pixels, 0-255
+    real_change_mean: float = float("nan")  # the same over real pixels
+    synth_flicker_pairs: int = 0  # consecutive output pairs that entered the three above
 
     def to_dict(self) -> dict:
         """JSON-serialisable (NaN becomes None), with the input's stats nested under "input"."""
@@ -350,6 +371,92 @@ def black_fraction(rgb: np.ndarray, level: int = 7) -> float:
     return float(counts[keep].sum()) / dark.size
 
 
+# labels of synthesized_labels: 0 is reserved for "outside the frame" once a label image is warped
+LABEL_REAL, LABEL_SEAM, LABEL_SYNTH = 1, 2, 3
+
+
+def synthesized_labels(H: np.ndarray, shape: tuple[int, int], seam_px: int = 2) -> np.ndarray:
+    """uint8 (height, width) labels of an output frame: LABEL_REAL inside the input frame mapped by H
+    (``x_out ~ H x_in``; the input has the output's size), LABEL_SYNTH outside, LABEL_SEAM within
+    ``seam_px`` pixels of the outline on either side."""
+    h, w = shape
+    corners = np.float64([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
+    mapped = cv2.perspectiveTransform(corners.reshape(-1, 1, 2), np.asarray(H, np.float64)).reshape(-1, 2)
+    inside = np.zeros((h, w), np.uint8)
+    if np.all(np.isfinite(mapped)):
+        pts = np.round(np.clip(mapped, -1e5, 1e5) * 16).astype(np.int32)  # 4 fractional bits
+        cv2.fillPoly(inside, [pts], 1, lineType=cv2.LINE_8, shift=4)
+    inner = outer = inside
+    if seam_px > 0:
+        kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * seam_px + 1, 2 * seam_px + 1))
+        inner, outer = cv2.erode(inside, kernel), cv2.dilate(inside, kernel)
+    # 3 - 1 - 1 = LABEL_REAL inside the eroded outline, 3 - 0 - 1 = LABEL_SEAM in the band, 3 outside
+    return (LABEL_SYNTH - inner - outer).astype(np.uint8)
+
+
+def synthesized_change(prev_grey: np.ndarray, prev_labels: np.ndarray, grey: np.ndarray, labels: np.ndarray,
+                       M: np.ndarray) -> tuple[float, int, float, int]:
+    """(sum, count) of |grey - warp(prev_grey)| over synthesized pixels, then over real ones.
+
+    ``M`` maps the previous output frame to this one (``x_t ~ M x_{t-1}``). Real: real in both frames;
+    synthesized: synthesized in either, in neither's seam band; both inside the warped previous frame.
+    """
+    h, w = grey.shape
+    M = np.asarray(M, np.float64)
+    warped = cv2.warpPerspective(prev_grey, M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    prev = cv2.warpPerspective(prev_labels, M, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                               borderValue=0)
+    code = labels * np.uint8(4) + prev  # 4 x current label + previous label, 0..15
+    diff = cv2.absdiff(grey, warped)
+    out = []
+    for lut in (_SYNTH_LUT, _REAL_LUT):
+        mask = cv2.LUT(code, lut)  # 255 where the pixel is in the class
+        out += [cv2.sumElems(cv2.bitwise_and(diff, mask))[0], cv2.countNonZero(mask)]
+    return float(out[0]), int(out[1]), float(out[2]), int(out[3])
+
+
+def _code_lut(codes) -> np.ndarray:
+    lut = np.zeros(256, np.uint8)
+    lut[list(codes)] = 255
+    return lut
+
+
+_REAL_LUT = _code_lut([LABEL_REAL * 4 + LABEL_REAL])
+_SYNTH_LUT = _code_lut([LABEL_REAL * 4 + LABEL_SYNTH, LABEL_SYNTH * 4 + LABEL_REAL, LABEL_SYNTH * 4 + LABEL_SYNTH])
+
+
+class _FlickerTally:
+    """Streaming pooled sums of synthesized_change over consecutive output frames (keeps one frame)."""
+
+    def __init__(self, config: MetricsConfig) -> None:
+        self.config = config
+        self.prev: tuple[np.ndarray, np.ndarray] | None = None  # grey and labels of the previous frame
+        self.synth_sum = self.real_sum = 0.0
+        self.synth_n = self.real_n = 0
+        self.pairs = 0
+
+    def add(self, grey: np.ndarray, H: np.ndarray | None, M: np.ndarray | None) -> None:
+        """Frame t: its grey output, H_t (input -> output, None if failed), M_t (output t-1 -> t, None if failed or t = 0)."""
+        labels = None if H is None else synthesized_labels(H, grey.shape, self.config.seam_px)
+        if labels is not None and self.prev is not None and M is not None:
+            ss, sn, rs, rn = synthesized_change(self.prev[0], self.prev[1], grey, labels, M)
+            if sn >= self.config.min_synth_fraction * grey.size and rn > 0:
+                self.synth_sum += ss
+                self.synth_n += sn
+                self.real_sum += rs
+                self.real_n += rn
+                self.pairs += 1
+        self.prev = None if labels is None else (grey, labels)
+
+    def result(self) -> tuple[float, float, float]:
+        """(synth_flicker_ratio, synth_change_mean, real_change_mean); NaN without a counted pair."""
+        nan = float("nan")
+        if self.pairs == 0:
+            return nan, nan, nan
+        synth, real = self.synth_sum / self.synth_n, self.real_sum / self.real_n
+        return (synth / real if real > 0 else nan), synth, real
+
+
 def _low_frequency_share(signal: np.ndarray) -> float:
     x = np.asarray(signal, dtype=np.float64)
     if x.size < 3:
@@ -505,10 +612,10 @@ def compare(
 
     Per frame t: the input and output frames are detected once each (two worker threads), then
     three pairs are matched: input t -> output t, output t-1 -> output t, input t-1 -> input t. The
-    matches of frame t run while frame t+1 is decoded and detected; only features of the previous
-    frame are kept. ``progress(done, total)`` is called once per frame; total is the input's
-    declared frame count (0 when unknown). Raises InputError when a video cannot be read or the
-    frame counts differ.
+    matches of frame t run while frame t+1 is decoded and detected; of the previous frame only its
+    features and, for the flicker figure, its grey output frame and its labels are kept.
+    ``progress(done, total)`` is called once per frame; total is the input's declared frame count (0
+    when unknown). Raises InputError when a video cannot be read or the frame counts differ.
     """
     fps_in = video_fps(input_path)
     fps_out = video_fps(output_path)
@@ -526,14 +633,16 @@ def compare(
     dists: list[float] = []
     blacks: list[float] = []
     failed_io = 0
+    flicker = _FlickerTally(config)
     n = 0
     done = 0
     width = height = 0
 
-    def collect(jobs) -> None:
+    def collect(jobs, grey) -> None:
         nonlocal failed_io, done
         results = [j.result() for j in jobs]
         H = results[0]
+        flicker.add(grey, H, results[1] if len(results) == 3 else None)
         if H is None:
             failed_io += 1
         else:
@@ -565,22 +674,25 @@ def compare(
             fut_a = pool.submit(_detect, a, detectors[0][0], config)
             fut_b = pool.submit(_detect, b, detectors[1][0], config)
             if pending is not None:
-                collect(pending)
+                collect(*pending)
+            grey = cv2.cvtColor(b, cv2.COLOR_RGB2GRAY)
             fa, fb = fut_a.result(), fut_b.result()
-            pending = [pool.submit(_match, fa, fb, norm, config)]
+            jobs = [pool.submit(_match, fa, fb, norm, config)]
             if prev_in is not None:
-                pending.append(pool.submit(_match, prev_out, fb, norm, config, True))
-                pending.append(pool.submit(_match, prev_in, fa, norm, config, True))
+                jobs.append(pool.submit(_match, prev_out, fb, norm, config, True))
+                jobs.append(pool.submit(_match, prev_in, fa, norm, config, True))
+            pending = (jobs, grey)
             prev_in, prev_out = fa, fb
             n += 1
         if pending is not None:
-            collect(pending)
+            collect(*pending)
 
     if n == 0:
         raise InputError(f"video {input_path} has no frames")
     out_stats = _motion_stats(out_pairs, width, height, fps_out, n)
     in_stats = _motion_stats(in_pairs, width, height, fps_in, n)
     nan = float("nan")
+    ratio, synth_change, real_change = flicker.result()
     return StabilizationMetrics(
         cropping_ratio=float(np.mean(crops)) if crops else nan,
         distortion=float(np.min(dists)) if dists else nan,
@@ -593,4 +705,8 @@ def compare(
         input=in_stats,
         n_frames=n,
         failed_pairs=failed_io + out_stats.failed_pairs,
+        synth_flicker_ratio=ratio,
+        synth_change_mean=synth_change,
+        real_change_mean=real_change,
+        synth_flicker_pairs=flicker.pairs,
     )

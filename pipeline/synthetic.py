@@ -440,18 +440,20 @@ def _person_path(cfg: SyntheticConfig, patch_shape: tuple[int, ...], view_centre
     ph, pw = patch_shape[:2]
     lo, hi = cfg.person_speed_px
     limit = max(0.5 * cfg.object_sweep * w, 1.0)  # turns back once its centre is this far from the view's
-    x = rng.uniform(-0.5, 0.5) * limit
+    # Steps are drawn in the world (speed relative to the background); the turns look at the offset from the view.
+    x = view_centre_x[0] + rng.uniform(-0.5, 0.5) * limit
     direction = 1.0 if rng.random() < 0.5 else -1.0
-    offsets = np.empty(n)
+    xs = np.empty(n)
     for i in range(n):
-        offsets[i] = x
-        if abs(x) > limit and np.sign(x) == direction or rng.random() < 0.08:
+        xs[i] = x
+        offset = x - view_centre_x[min(i + 1, n - 1)]
+        if abs(offset) > limit and np.sign(offset) == direction or rng.random() < 0.08:
             direction = -direction
         x += direction * rng.uniform(lo, hi)
     bob = 0.02 * h * np.sin(np.arange(n) * 0.9 + rng.uniform(0, 2 * math.pi))
     # World coordinates of the intended view's centre are (view_centre_x, world_shift_y), drift aside; the
     # figure stands a little below it so that its feet reach the lower part of the frame.
-    poses = [_translation(view_centre_x[i] + offsets[i] - (pw - 1) / 2.0,
+    poses = [_translation(xs[i] - (pw - 1) / 2.0,
                           world_shift_y + 0.12 * h + bob[i] - (ph - 1) / 2.0) for i in range(n)]
     return np.stack(poses)
 

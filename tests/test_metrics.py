@@ -332,3 +332,72 @@ def test_real_clip_against_itself():
     assert stats.residual_jitter_px > 0.5  # it is shaky
     assert stats.residual_jitter_px == pytest.approx(r.input.residual_jitter_px, rel=1e-6)
     assert stats.residual_jitter_px == pytest.approx(r.residual_jitter_px, rel=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# Flicker of synthesized pixels
+
+
+def _completed_pair(tmp_path, photo, flicker: float, n: int = 30, zoom: float = 0.88, noise: float = 3.0) -> tuple:
+    """A shaky input and a full-frame "stabilized" output of it with known real and synthesized areas.
+
+    The output pans over the photo by whole pixels; input frame t is the output's view shrunk by ``zoom``
+    about the centre and shifted by a random jitter, so it covers the output's centre and the rest of the
+    output (about 1 - zoom^2 of it) is synthesized, here by the true photo. Every output frame gets fresh
+    Gaussian noise (sigma ``noise``, so the real area changes too); the synthesized area also gets a per-frame
+    offset of +-``flicker`` grey levels (random sign).
+    """
+    rng = np.random.default_rng(11)
+    inp, out = [], []
+    for t in range(n):
+        view = _shift(90.0 + t, 60.0)  # output pixel -> photo
+        jx, jy = np.clip(rng.normal(0, 3.0, 2), -6, 6)
+        out_from_in = _shift(jx, jy) @ np.linalg.inv(_about_centre(zoom, zoom))
+        inp.append(_render(photo, view @ out_from_in))
+        real = cv2.warpPerspective(np.ones((H, W), np.uint8), out_from_in, (W, H), flags=cv2.INTER_NEAREST) > 0
+        frame = _render(photo, view).astype(np.float64) + rng.normal(0, noise, (H, W, 1))
+        frame[~real] += flicker * rng.choice([-1.0, 1.0])
+        out.append(np.clip(np.round(frame), 0, 255).astype(np.uint8))
+    return _write(tmp_path / "in.mkv", inp), _write(tmp_path / f"out{flicker:g}.mkv", out)
+
+
+def test_flicker_ratio_separates_flickering_from_steady_synthesized_areas(tmp_path, photo):
+    steady = metrics.compare(*_completed_pair(tmp_path, photo, flicker=0.0))
+    flickering = metrics.compare(*_completed_pair(tmp_path, photo, flicker=10.0))
+    for r in (steady, flickering):
+        assert r.synth_flicker_pairs >= 25  # of 29: every pair has about 22 % synthesized pixels
+        assert 2.5 < r.real_change_mean < 5.0  # the noise: E|N(0, 3 sqrt 2)| = 3.4, plus alignment error
+    assert steady.synth_flicker_ratio <= 1.2
+    assert flickering.synth_flicker_ratio > 1.5
+    assert flickering.synth_change_mean > 8.0  # half the pairs change sign: 20 levels, the others about 3.4
+    assert flickering.to_dict()["synth_flicker_ratio"] == pytest.approx(flickering.synth_flicker_ratio)
+
+
+def test_flicker_ratio_is_none_without_synthesized_pixels(tmp_path, photo, capsys):
+    from ffviz.cli import main
+
+    inp, out = _pair_of_videos(tmp_path, photo, 12, lambda t: _about_centre(1.25, 1.25))  # a crop
+    r = metrics.compare(inp, out)
+    assert r.synth_flicker_pairs == 0
+    assert all(math.isnan(v) for v in (r.synth_flicker_ratio, r.synth_change_mean, r.real_change_mean))
+    d = r.to_dict()
+    assert d["synth_flicker_ratio"] is None and d["synth_change_mean"] is None and d["real_change_mean"] is None
+    json.dumps(d)
+    assert main(["metrics", str(inp), str(out)]) == 0
+    row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("synthesized-pixel flicker")]
+    assert len(row) == 1 and row[0].split()[-1] == "-"
+
+
+def test_synthesized_labels_and_change_on_known_frames():
+    shape = (60, 80)
+    labels = metrics.synthesized_labels(_shift(10, 0), shape, seam_px=2)  # input covers columns 10..79
+    assert (labels[:, :8] == metrics.LABEL_SYNTH).all() and (labels[:, 12:] == metrics.LABEL_REAL).all()
+    assert (labels[:, 8:12] == metrics.LABEL_SEAM).all()  # 2 px either side of the outline
+    assert (metrics.synthesized_labels(np.eye(3), shape) == metrics.LABEL_REAL).all()
+    rng = np.random.default_rng(3)
+    prev = rng.integers(0, 200, shape, dtype=np.uint8)
+    cur = prev.copy()
+    cur[:, :8] += 20  # the synthesized strip changes by 20, the real area not at all
+    ss, sn, rs, rn = metrics.synthesized_change(prev, labels, cur, labels, np.eye(3))
+    assert sn == 60 * 8 and ss == pytest.approx(20 * sn)
+    assert rn == 60 * (80 - 12) and rs == 0.0
