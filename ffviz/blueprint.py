@@ -46,10 +46,13 @@ def _deblur_tab() -> rrb.Container:
             rrb.Spatial2DView(name="before deblurring", origin="/", contents=[f"/{ent.DEBLUR_BEFORE}"]),
             rrb.Spatial2DView(name="after deblurring (eq. 30)", origin="/", contents=[f"/{ent.DEBLUR_AFTER}"]),
             rrb.Spatial2DView(name="share from sharper neighbours (eqs. 30-31)", origin="/", contents=[f"/{ent.DEBLUR_WEIGHTS}"]),
+            rrb.Spatial2DView(name="main source per pixel; red: refused, other content",
+                              origin="/", contents=[f"/{ent.DEBLUR_BEFORE}", f"/{ent.DEBLUR_SOURCE}"]),
         ),
         rrb.Horizontal(
             rrb.TimeSeriesView(name="relative blurriness b_t (eq. 28)", origin=f"/{ent.DEBLUR_BLURRINESS}"),
             rrb.TimeSeriesView(name="sharper neighbours used", origin=f"/{ent.DEBLUR_NEIGHBOURS}"),
+            rrb.TimeSeriesView(name="refused share of the frame", origin=f"/{ent.DEBLUR_REFUSED}"),
         ),
         name="deblur",
     )

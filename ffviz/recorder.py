@@ -82,6 +82,9 @@ class RerunRecorder:
         self.rec.log(ent.COMPLETION_FALLBACK, rr.AnnotationContext([(0, "other", (0, 0, 0, 0)),
                                                                      (1, "fallback", (255, 200, 0, 200))]), static=True)
         self.rec.log(ent.COMPLETION_FILLED_BY, rr.AnnotationContext(self._filled_by_legend()), static=True)
+        self.rec.log(ent.DEBLUR_SOURCE, rr.AnnotationContext(self._deblur_source_legend()), static=True)
+        self.rec.log(ent.DEBLUR_REFUSED, rr.SeriesLines(names="refused (share of the frame)", colors=[(230, 40, 60)]),
+                     static=True)
         self.rec.log(ent.DEBLUR_BLURRINESS, rr.SeriesLines(names="blurriness b_t", colors=[(200, 80, 200)]), static=True)
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.SeriesLines(names="sharper neighbours used", colors=[(90, 160, 90)]),
                      static=True)
@@ -204,8 +207,13 @@ class RerunRecorder:
         neighbours = tuple(getattr(result, "neighbours", None) or ())
         self.rec.log(ent.DEBLUR_BLURRINESS, rr.Scalars(float(result.blurriness)))
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.Scalars(len(neighbours)))
+        refused = getattr(result, "refused", None)
+        self.rec.log(ent.DEBLUR_REFUSED, rr.Scalars(float(refused.mean()) if refused is not None else 0.0))
         if self.level != "full":
             return
+        # Where each pixel came from, and where a sharper neighbour was refused (shown even when none was used).
+        classes = self._deblur_source_classes(result)
+        self.rec.log(ent.DEBLUR_SOURCE, rr.SegmentationImage(classes) if classes.any() else rr.Clear(recursive=False))
         if not neighbours:  # nothing was sharpened: clear, so the viewer shows no stale frame from earlier
             for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS):
                 self.rec.log(entity, rr.Clear(recursive=False))
@@ -293,6 +301,30 @@ class RerunRecorder:
                 hue = (offset + max_offset) / (2 * max_offset)
                 colour = tuple(int(255 * c) for c in (hue, 0.3, 1.0 - hue)) + (190,)
                 legend.append((FILLED_BY_BASE + offset, f"neighbour {offset:+d}", colour))
+        return legend
+
+    @staticmethod
+    def _deblur_source_classes(result: Any) -> np.ndarray:
+        """Class per pixel: 0 the frame's own, 1 refused, FILLED_BY_BASE + offset the neighbour that gave most."""
+        shape = result.frame.shape[:2]
+        classes = np.zeros(shape, np.uint8)
+        source = getattr(result, "main_source", None)
+        if source is not None:
+            taken = source != 0
+            classes[taken] = (FILLED_BY_BASE + source[taken].astype(np.int16)).astype(np.uint8)
+        refused = getattr(result, "refused", None)
+        if refused is not None:
+            classes[refused] = 1
+        return classes
+
+    @staticmethod
+    def _deblur_source_legend(max_offset: int = 30) -> list:
+        legend = [(0, "own frame", (0, 0, 0, 0)), (1, "refused: other content", (230, 40, 60, 200))]
+        for offset in range(-max_offset, max_offset + 1):
+            if offset:
+                hue = (offset + max_offset) / (2 * max_offset)
+                colour = tuple(int(255 * c) for c in (hue, 0.3, 1.0 - hue)) + (170,)
+                legend.append((FILLED_BY_BASE + offset, f"from neighbour {offset:+d}", colour))
         return legend
 
     @staticmethod

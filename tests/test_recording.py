@@ -145,6 +145,15 @@ def test_deblur_family_matches_the_pipeline(full_run):
     np.testing.assert_array_equal(recording.image(ent.DEBLUR_BEFORE, t), deblurred[t].before)
     np.testing.assert_array_equal(recording.image(ent.DEBLUR_AFTER, t), deblurred[t].frame)
     assert_weights(recording.image(ent.DEBLUR_WEIGHTS, t), deblurred[t].weights)
+    # Where each pixel came from: the main source's offset, and the refused pixels, per frame.
+    np.testing.assert_allclose(recording.scalars(ent.DEBLUR_REFUSED)[1],
+                               [0.0 if deblurred[f].refused is None else deblurred[f].refused.mean() for f in frames])
+    source = recording.image(ent.DEBLUR_SOURCE, t).astype(int)
+    result = deblurred[t]
+    np.testing.assert_array_equal(source == 1, result.refused)
+    taken = (result.main_source != 0) & ~result.refused
+    np.testing.assert_array_equal(source[taken] - FILLED_BY_BASE, result.main_source[taken])
+    assert taken.any()
 
 
 def test_log_and_meta(full_run):
