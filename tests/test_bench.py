@@ -107,6 +107,8 @@ def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
     # the same stabilization (measured 2.8 px against none's 2.6; the input's 12.4): codec noise apart
     assert same_as_opencv["jitter_px"] < 0.4 * source["jitter_px"]
     assert rows["ffviz none"]["black"] > rows["ffviz crop"]["black"] + 0.005  # uncovered borders stay black
+    assert rows["ffviz crop"]["flicker"] is None  # a crop synthesizes no pixels: no flicker figure
+    assert "flicker" in (out / "bench.md").read_text().splitlines()[0]
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg not installed: no vidstab/deshake peers")
