@@ -1,4 +1,4 @@
-"""Choose the default smoothing radius k from the real clips (README, "Choosing k").
+"""Choose the default smoothing radius k from the real clips (docs/how-it-works.md, "Choosing k").
 
 For each clip: one motion pass, then for each k the residual jitter the output would have, measured
 exactly as pipeline.metrics measures a video (its trajectory() and residual_jitter() applied to the

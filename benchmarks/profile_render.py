@@ -3,7 +3,7 @@
 The synthetic clip has the demo's hand-held jitter, a moving object and its default blurred frames, so
 completion and deblurring both work as on a real clip. Prints frames/s for each mode with one worker thread and
 with one per core (after a warm-up run that compiles the numba kernels), then a cProfile of one full-mode run: the pipeline's own functions by
-cumulative time. Used for the before/after figures of issue 6 (README "Speed").
+cumulative time. Used for the before/after figures of issue 6 (docs/benchmarks-history.md).
 
 Usage: python benchmarks/profile_render.py [--size 640x360] [--frames 40] [--modes none,crop,full] [--top 30]
 """

@@ -19,7 +19,7 @@ import numpy as np
 
 from pipeline import geometry
 
-DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see README "Choosing k"
+DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
 
 
 @dataclass(frozen=True)
