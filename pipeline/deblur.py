@@ -287,63 +287,59 @@ class StructureGuard:
     Works at the alignment error's resolution (ErrorGrid); the target's statistics are made once per frame.
     """
 
-    def __init__(self, target_small: np.ndarray, sigma: float, window: int, minimum: float) -> None:
+    def __init__(self, target_small: np.ndarray, sigma: float, window: float, minimum: float) -> None:
         self.sigma = sigma
+        window = max(round(window), 1)
         self.size = (2 * window + 1, 2 * window + 1)
         self.minimum = np.float32(minimum)
         self.target = self._low_passed(target_small)
         # Both images are centred on the target's mean: the same covariances, with float32 sums of smaller products.
+        self._products: np.ndarray | None = None
+        self._means: np.ndarray | None = None
         self.offset = np.float32(self.target.mean())
         self.target -= self.offset
-        self.target_mean = self._box(self.target)
-        self.target_var = self._box(self.target * self.target) - self.target_mean * self.target_mean
+        moments = self._box(np.stack([self.target, self.target * self.target]))
+        self.target_mean = moments[0]
+        self.target_var = moments[1] - self.target_mean * self.target_mean
 
     def _low_passed(self, rgb: np.ndarray) -> np.ndarray:
         grey = intensity(rgb)
         return cv2.GaussianBlur(grey, (0, 0), self.sigma) if self.sigma > 0 else grey
 
-    def _box(self, image: np.ndarray) -> np.ndarray:
-        return cv2.boxFilter(image, cv2.CV_32F, self.size, borderType=cv2.BORDER_REFLECT)
+    def _box(self, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Window means of each plane of (c, h, w) float32 ``planes`` (edges reflected)."""
+        out = np.empty_like(planes) if out is None else out
+        for plane, mean in zip(planes, out):
+            cv2.boxFilter(plane, cv2.CV_32F, self.size, dst=mean, borderType=cv2.BORDER_REFLECT)
+        return out
 
     def agreement(self, neighbour_small: np.ndarray) -> np.ndarray:
         """(h, w) float32: the contrast-structure term at each low-res cell."""
-        return self._agreements(neighbour_small)[0]
+        agreement = np.empty_like(self.target)
+        self._decide(neighbour_small, np.ones(self.target.shape, np.float32), agreement)
+        return agreement
 
-    def _agreements(self, neighbour_small: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The contrast-structure term as aligned, and its largest value with the neighbour moved one cell
-        left, right, up or down."""
-        other = self._low_passed(neighbour_small) - self.offset
-        mean = self._box(other)
-        var = np.maximum(self._box(other * other) - mean * mean, 0)
-        target_var = np.maximum(self.target_var, 0)
-        cov = self._box(self.target * other) - self.target_mean * mean
-        aligned = (2.0 * cov + STRUCTURE_C) / (target_var + var + STRUCTURE_C)
-        padded = cv2.copyMakeBorder(other, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
-        padded_mean = cv2.copyMakeBorder(mean, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
-        padded_var = cv2.copyMakeBorder(var, 1, 1, 1, 1, cv2.BORDER_REPLICATE)
-        height, width = other.shape
-        moved = np.full_like(aligned, -np.inf)
-        for dy, dx in ((0, 1), (2, 1), (1, 0), (1, 2)):
-            window = (slice(dy, dy + height), slice(dx, dx + width))
-            cov_moved = self._box(self.target * padded[window]) - self.target_mean * padded_mean[window]
-            np.maximum(moved, (2.0 * cov_moved + STRUCTURE_C) / (target_var + padded_var[window] + STRUCTURE_C),
-                       out=moved)
-        # Where either window is flat, a shift changes nothing that shows; at the image's edge the moved windows
-        # would read padding.
-        moved[np.minimum(target_var, var) < STRUCTURE_SHIFT_MIN_VAR] = -np.inf
-        edge = self.size[0] // 2 + 1
-        moved[:edge], moved[-edge:], moved[:, :edge], moved[:, -edge:] = -np.inf, -np.inf, -np.inf, -np.inf
-        return aligned, moved
+    def _decide(self, neighbour_small: np.ndarray, weight: np.ndarray, agreement: np.ndarray) -> np.ndarray:
+        """uint8 (h, w): 1 where refused, before the opening (kernels.structure_refusal)."""
+        other = self._low_passed(neighbour_small)
+        other -= self.offset
+        # Scratch planes kept for every neighbour of this target (fresh megabytes would cost page faults each time).
+        if self._products is None:
+            self._products = np.empty((8, *other.shape), np.float32)
+            self._means = np.empty_like(self._products)
+        kernels.structure_products(self.target, other, np.ascontiguousarray(weight, np.float32), self._products)
+        means = self._box(self._products, self._means)
+        return kernels.structure_refusal(means, self.target_mean, self.target_var, np.float32(STRUCTURE_C),
+                                         self.minimum, np.float32(STRUCTURE_SHIFT_MARGIN), STRUCTURE_SHIFT_MIN_VAR,
+                                         self.size[0] // 2 + 1, agreement)
 
     def refused(self, neighbour_small: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
         """bool (h, w) of the refused cells, None when there are none. ``weight``: the neighbour's coverage
         share of each cell (the alignment error's)."""
-        judged = self._box(weight) >= np.float32(0.999)
-        aligned, moved = self._agreements(neighbour_small)
-        refused = ((aligned < self.minimum) | (moved > aligned + STRUCTURE_SHIFT_MARGIN)) & judged
+        refused = self._decide(neighbour_small, weight, np.empty_like(self.target))
         if not refused.any():
             return None
-        refused = cv2.morphologyEx(refused.view(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)).view(bool)
+        refused = cv2.morphologyEx(refused, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)).view(bool)
         return refused if refused.any() else None
 
 
@@ -378,7 +374,7 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
         grid = kernels.ErrorGrid(target, target_valid, config.error_sigma_px * scale, grow)
         taken = kernels.Contributions(len(sharper), grid, target_valid)
         guard = None if config.structure_min is None else StructureGuard(
-            grid.target_small, grid.sigma_small, max(round(config.structure_window_px * scale / grid.factor), 1),
+            grid.target_small, grid.sigma_small, config.structure_window_px * scale / grid.factor,
             config.structure_min)
         for n in sharper:
             rgb = taken.next_rgb()

@@ -583,3 +583,66 @@ class Contributions:
         rejected = _NO_REJECTED if self.rejected is None else self.rejected[:k]
         return (self.rgbs[:k], masks, self.mask_index[:k], rejected, self.has_rejected[:k], self.errors[:k],
                 self.firsts[:k], self.lasts[:k], self.exacts[:k], self.ratios[:k])
+
+
+@njit(cache=True, nogil=True)
+def structure_products(target: np.ndarray, other: np.ndarray, weight: np.ndarray, out: np.ndarray) -> None:
+    """The per-cell terms whose window means StructureGuard (pipeline/deblur.py) needs, into ``out`` (8, h, w):
+    o, o^2, t o, then t times o one cell to the left, right, above and below (clamped at the edge: o(p - d) for
+    d = (0, 1), (0, -1), (1, 0), (-1, 0) in (row, column)), and the coverage weight."""
+    height, width = target.shape
+    for y in range(height):
+        up, down = max(y - 1, 0), min(y + 1, height - 1)
+        for x in range(width):
+            left, right = max(x - 1, 0), min(x + 1, width - 1)
+            t, o = target[y, x], other[y, x]
+            out[0, y, x] = o
+            out[1, y, x] = o * o
+            out[2, y, x] = t * o
+            out[3, y, x] = t * other[y, left]
+            out[4, y, x] = t * other[y, right]
+            out[5, y, x] = t * other[up, x]
+            out[6, y, x] = t * other[down, x]
+            out[7, y, x] = weight[y, x]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def structure_refusal(means: np.ndarray, target_mean: np.ndarray, target_var: np.ndarray, c: np.float32,
+                      minimum: np.float32, margin: np.float32, min_var: np.float32, edge: int,
+                      agreement: np.ndarray) -> np.ndarray:
+    """StructureGuard's decision per cell from the window means of structure_products' terms: the contrast-
+    structure term (2 cov + c) / (var_t + var_o + c) into ``agreement``; refused (uint8 1) where the window lies
+    wholly in the neighbour's coverage and the term is below ``minimum``, or, where both windows have structure
+    (variances >= ``min_var``) and lie ``edge`` cells from the image's edge, the neighbour moved one cell agrees
+    better by more than ``margin``."""
+    height, width = target_mean.shape
+    refused = np.zeros((height, width), np.uint8)
+    full = np.float32(0.999)
+    zero = np.float32(0.0)
+    two = np.float32(2.0)
+    for y in range(height):
+        for x in range(width):
+            mean_o = means[0, y, x]
+            var_o = max(means[1, y, x] - mean_o * mean_o, zero)
+            var_t = max(target_var[y, x], zero)
+            mean_t = target_mean[y, x]
+            aligned = (two * (means[2, y, x] - mean_t * mean_o) + c) / (var_t + var_o + c)
+            agreement[y, x] = aligned
+            if means[7, y, x] < full:
+                continue
+            if aligned < minimum:
+                refused[y, x] = 1
+                continue
+            if min(var_t, var_o) < min_var or y < edge or y >= height - edge or x < edge or x >= width - edge:
+                continue
+            for k in range(4):
+                yy = y - (1 if k == 2 else 0) + (1 if k == 3 else 0)
+                xx = x - (1 if k == 0 else 0) + (1 if k == 1 else 0)
+                mean_moved = means[0, yy, xx]
+                var_moved = max(means[1, yy, xx] - mean_moved * mean_moved, zero)
+                moved = (two * (means[3 + k, y, x] - mean_t * mean_moved) + c) / (var_t + var_moved + c)
+                if moved > aligned + margin:
+                    refused[y, x] = 1
+                    break
+    return refused
+
