@@ -415,7 +415,7 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
         return DeblurResult(target, target, blurriness_t, (), np.zeros((height, width), np.float32), dict(ratios),
                             refused=refused)
     return DeblurResult(frame, target, blurriness_t, used, weights, dict(ratios),
-                        main_source=_main_source(taken, grid, alpha, weights), refused=_refused(taken, target_valid))
+                        main_source=_main_source(taken, alpha, weights), refused=_refused(taken, target_valid))
 
 
 def _refused(taken: kernels.Contributions, target_valid: np.ndarray) -> np.ndarray:
@@ -426,20 +426,16 @@ def _refused(taken: kernels.Contributions, target_valid: np.ndarray) -> np.ndarr
     return union.view(bool) & target_valid
 
 
-def _main_source(taken: kernels.Contributions, grid: kernels.ErrorGrid, alpha: np.float32,
+def _main_source(taken: kernels.Contributions, alpha: np.float32,
                  weights: np.ndarray) -> np.ndarray:
-    """(H, W) int8: per pixel, the offset of the neighbour with the largest eq. 31 weight (judged on the
-    alignment error's grid, refused pixels excluded), 0 where neighbours gave under 5 % of the pixel."""
+    """(H, W) int8: per pixel, the offset of the neighbour with the largest eq. 31 weight, judged on the alignment
+    error's grid (where a neighbour was refused its error is REFUSED_ERROR, so it loses), 0 where neighbours gave
+    under 5 % of the pixel. For the record: what the viewer shows as where each pixel came from."""
     count = taken.count
-    small = taken.ratios[:count, None, None] * alpha / (taken.errors[:count] + alpha)
-    best = np.argmax(small, axis=0)
-    offsets = np.asarray(taken.offsets, np.int8)[best]
+    small = taken.ratios[:count, None, None] / (taken.errors[:count] + alpha)  # eq. 31 up to the common alpha
+    offsets = np.asarray(taken.offsets, np.int8)[np.argmax(small, axis=0)]
     height, width = weights.shape
     source = cv2.resize(offsets, (width, height), interpolation=cv2.INTER_NEAREST)
-    if taken.rejected is not None:
-        # A refused pixel's own neighbour cannot be its source: fall back to "none" there (rare, at edges).
-        for k in np.flatnonzero(taken.has_rejected[:count]):
-            source[(taken.rejected[k] != 0) & (source == taken.offsets[k])] = 0
     source[weights < 0.05] = 0
     return source
 
