@@ -117,6 +117,8 @@ STRUCTURE_C = 1.0  # the contrast-structure term's stabiliser: windows flatter t
 # (a ghost of flat content on flat content is invisible)
 STRUCTURE_SHIFT_MARGIN = 0.05  # refuse where moving the neighbour by one cell agrees better by this much ...
 STRUCTURE_SHIFT_MIN_VAR = np.float32(9.0)  # ... in windows with structure in both images (std >= 3 levels)
+STRUCTURE_FLAT_VAR = np.float32(9.0)  # windows whose variances are both below this are flat (std < 3 levels) ...
+STRUCTURE_FLAT_DIFFERENCE = np.float32(2.0)  # ... and refused when their mean levels differ by more than this
 REFUSED_ERROR = np.float32(1e4)  # what a refused low-res cell's alignment error is set to: far above any threshold
 # Energy maps are kept at this fraction of the frame size: means over large polygons barely change, and
 # masking 16x fewer pixels keeps the per-frame cost of the window's blurriness small.
@@ -280,9 +282,12 @@ class StructureGuard:
     see-through ghost. Here both images are low-passed as for E (intensity, Gaussian of E's sigma: blur by a kernel
     that sums to 1 leaves what remains nearly unchanged) and compared by the contrast-structure term of SSIM over
     a square window, (2 cov + C) / (var_t + var_t' + C): near 1 where the same structure shows (sharper or not),
-    near 0 for other content, and 1 where both are flat (nothing to ghost). Cells below ``minimum`` are refused;
-    specks of one cell are dropped first (a 3x3 opening), so that isolated edge cells of a sharp neighbour do not
-    punch holes in the transfer once dilated. Only windows wholly inside the neighbour's coverage are judged.
+    near 0 for other content, and 1 where both are flat. Cells below ``minimum`` are refused, and so are cells where
+    the neighbour moved by one cell agrees better (a same-looking object a few px off, which the smooth windows
+    cannot tell from aligned), and flat windows whose mean levels differ by over 2 (another flat surface: a
+    transfer could not sharpen anything there, only shift its colour). Specks of one cell are then dropped (a 3x3
+    opening), so that isolated edge cells of a sharp neighbour do not punch holes in the transfer once dilated.
+    Only windows wholly inside the neighbour's coverage are judged. Thresholds: benchmarks/dynamic_scene.py.
 
     Works at the alignment error's resolution (ErrorGrid); the target's statistics are made once per frame.
     """
@@ -331,7 +336,8 @@ class StructureGuard:
         means = self._box(self._products, self._means)
         return kernels.structure_refusal(means, self.target_mean, self.target_var, np.float32(STRUCTURE_C),
                                          self.minimum, np.float32(STRUCTURE_SHIFT_MARGIN), STRUCTURE_SHIFT_MIN_VAR,
-                                         self.size[0] // 2 + 1, agreement)
+                                         self.size[0] // 2 + 1, agreement, STRUCTURE_FLAT_VAR,
+                                         STRUCTURE_FLAT_DIFFERENCE)
 
     def refused(self, neighbour_small: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
         """bool (h, w) of the refused cells, None when there are none. ``weight``: the neighbour's coverage

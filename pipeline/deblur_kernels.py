@@ -609,7 +609,7 @@ def structure_products(target: np.ndarray, other: np.ndarray, weight: np.ndarray
 @njit(cache=True, nogil=True, error_model="numpy")
 def structure_refusal(means: np.ndarray, target_mean: np.ndarray, target_var: np.ndarray, c: np.float32,
                       minimum: np.float32, margin: np.float32, min_var: np.float32, edge: int,
-                      agreement: np.ndarray) -> np.ndarray:
+                      agreement: np.ndarray, flat_var: np.float32, flat_difference: np.float32) -> np.ndarray:
     """StructureGuard's decision per cell from the window means of structure_products' terms: the contrast-
     structure term (2 cov + c) / (var_t + var_o + c) into ``agreement``; refused (uint8 1) where the window lies
     wholly in the neighbour's coverage and the term is below ``minimum``, or, where both windows have structure
@@ -632,6 +632,9 @@ def structure_refusal(means: np.ndarray, target_mean: np.ndarray, target_var: np
                 continue
             if aligned < minimum:
                 refused[y, x] = 1
+                continue
+            if max(var_t, var_o) < flat_var and abs(mean_t - mean_o) > flat_difference:
+                refused[y, x] = 1  # both flat, yet not the same level: another flat surface
                 continue
             if min(var_t, var_o) < min_var or y < edge or y >= height - edge or x < edge or x >= width - edge:
                 continue

@@ -159,3 +159,16 @@ def test_vplab_woman_stays_as_sharp_as_without_deblurring():
             assert psnr(result.frame[box], result.before[box]) >= 38.0
             checked += 1
     assert checked >= 5
+
+
+def test_flat_windows_take_no_other_flat_surface():
+    """Two flat surfaces a few levels apart (a plain coat over a plain wall) pass the colour test (E far below 32)
+    and agree in structure (both flat); a transfer could sharpen nothing there, only shift the colour, so it is
+    refused. One level apart (noise, exposure) it is not."""
+    rng = np.random.default_rng(1)
+    target = np.clip(100 + rng.normal(0, 0.5, (180, 320, 3)), 0, 255).astype(np.uint8)
+    guard = deblur.StructureGuard(target, 2.0, 4, deblur.STRUCTURE_MIN)
+    weight = np.ones((180, 320), np.float32)
+    refused = guard.refused(np.clip(target.astype(int) + 6, 0, 255).astype(np.uint8), weight)
+    assert refused is not None and refused[10:-10, 10:-10].all()
+    assert guard.refused(np.clip(target.astype(int) + 1, 0, 255).astype(np.uint8), weight) is None
