@@ -100,6 +100,13 @@ ones are real in both frames, *synthesized* ones are synthesized in either and i
 real picture (both see the same codec noise and alignment error), above when they flicker. NaN when
 no pair has synthesized pixels (a crop), as are the means then.
 
+Reading
+-------
+Both videos are read only through ``pipeline.video_io.VideoReader``, one streaming pass each: frames
+are upright RGB (the container's rotation tag applied, as the stabilizer reads its input and writes
+its output untagged), and an undecodable frame is stood in for by the previous one, so frame counts
+agree with the stabilizer's.
+
 Failures
 --------
 ``failed_pairs`` of ``StabilizationMetrics`` counts the failed input-output pairs plus the failed
@@ -113,15 +120,15 @@ from __future__ import annotations
 
 import math
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Callable, Iterator
 
-import av
 import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from pipeline import video_io
 from pipeline.errors import InputError
 
 _MIN_INLIERS = 8
@@ -198,59 +205,23 @@ class StabilizationMetrics:
 
 
 # ----------------------------------------------------------------------------------------------
-# Reading
+# Reading: only through pipeline.video_io, so both videos are seen upright (the container's rotation
+# tag applied) exactly as the stabilizer saw its input and wrote its output, and a frame that does not
+# decode is stood in for as in the stabilizer (frame count and timing kept). Read raw, a phone clip
+# tagged "rotate 90" is landscape while its upright output is portrait: the output was squeezed onto
+# the input's size and the distortion read about 0.56 instead of 0.99.
 
 
-def _open(path):
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"cannot read video {p}: no such file")
-    try:
-        container = av.open(str(p))
-    except Exception as error:  # noqa: BLE001 - any failure to open means an unusable input
-        raise InputError(f"cannot read video {p}: {_one_line(error)}") from None
-    if not container.streams.video:
-        container.close()
-        raise InputError(f"cannot read video {p}: no video stream")
-    stream = container.streams.video[0]
-    stream.thread_type = "AUTO"
-    return container, stream
-
-
-def _one_line(error: BaseException) -> str:
-    return " ".join(str(error).split()) or type(error).__name__
-
-
-def video_fps(path) -> float:
-    """Frame rate of the first video stream (30 when the file does not say)."""
-    container, stream = _open(path)
-    try:
-        rate = stream.average_rate or stream.guessed_rate or stream.base_rate
-        fps = float(rate) if rate else 0.0
-    finally:
-        container.close()
+def _fps(info: video_io.VideoInfo) -> float:
+    """Frame rate for the jitter low-pass (sigma = fps / 2 frames)."""
+    fps = float(info.fps)
     return fps if math.isfinite(fps) and fps > 0 else 30.0
 
 
-def _declared_frames(path) -> int:
-    container, stream = _open(path)
-    try:
-        return int(stream.frames or 0)
-    finally:
-        container.close()
-
-
-def iter_frames(path) -> Iterator[np.ndarray]:
-    """Decoded frames of the first video stream, as RGB uint8 arrays of shape (H, W, 3)."""
-    container, stream = _open(path)
-    try:
-        try:
-            for frame in container.decode(stream):
-                yield frame.to_ndarray(format="rgb24")
-        except Exception as error:  # noqa: BLE001 - av raises many types for corrupt data
-            raise InputError(f"cannot decode video {path}: {_one_line(error)}") from None
-    finally:
-        container.close()
+def _pictures(reader: video_io.VideoReader) -> Iterator[np.ndarray]:
+    """The reader's upright RGB frames, (H, W, 3) uint8, one at a time."""
+    for frame in reader:
+        yield frame.rgb
 
 
 # ----------------------------------------------------------------------------------------------
@@ -572,16 +543,16 @@ def video_motion_stats(path, config: MetricsConfig = MetricsConfig()) -> VideoMo
 
     Detection of frame t runs in a worker thread while frames t-2 and t-1 are matched in the other.
     """
-    fps = video_fps(path)
     detectors = [_detector(config) for _ in range(2)]  # one per thread: a detector is not shared
     norm = detectors[0][1]
     pair_futures = []
     n = 0
     width = height = 0
-    with ThreadPoolExecutor(max_workers=2) as pool:
+    with video_io.VideoReader(path) as reader, ThreadPoolExecutor(max_workers=2) as pool:
+        fps = _fps(reader.info)
         pending = None  # detection of the previous frame
         last: _Features | None = None  # features of the frame before it
-        for rgb in iter_frames(path):
+        for rgb in _pictures(reader):
             if n == 0:
                 height, width = rgb.shape[:2]
             future = pool.submit(_detect, rgb, detectors[n % 2][0], config)
@@ -614,17 +585,26 @@ def compare(
     three pairs are matched: input t -> output t, output t-1 -> output t, input t-1 -> input t. The
     matches of frame t run while frame t+1 is decoded and detected; of the previous frame only its
     features and, for the flicker figure, its grey output frame and its labels are kept.
-    ``progress(done, total)`` is called once per frame; total is the input's declared frame count (0
-    when unknown). Raises InputError when a video cannot be read or the frame counts differ.
+    ``progress(done, total)`` is called once per frame; total is the input's frame count from its
+    container (video_io.VideoInfo.frame_count: an estimate for MKV). Both videos are read upright
+    through video_io (see Reading). Raises InputError when a video cannot be read or the frame
+    counts differ.
     """
-    fps_in = video_fps(input_path)
-    fps_out = video_fps(output_path)
-    total = _declared_frames(input_path)
+    with ExitStack() as stack:
+        in_reader = stack.enter_context(video_io.VideoReader(input_path))
+        out_reader = stack.enter_context(video_io.VideoReader(output_path))
+        return _compare(in_reader, out_reader, config, progress)
+
+
+def _compare(in_reader: video_io.VideoReader, out_reader: video_io.VideoReader, config: MetricsConfig,
+             progress: Callable[[int, int], None] | None) -> StabilizationMetrics:
+    fps_in, fps_out = _fps(in_reader.info), _fps(out_reader.info)
+    total = in_reader.info.frame_count  # the container's count (an estimate for MKV): for progress only
     detectors = [_detector(config) for _ in range(2)]  # one per thread: a detector is not shared
     norm = detectors[0][1]
 
-    in_iter = iter_frames(input_path)
-    out_iter = iter_frames(output_path)
+    in_iter = _pictures(in_reader)
+    out_iter = _pictures(out_reader)
     prev_in: _Features | None = None
     prev_out: _Features | None = None
     in_pairs: list = []
@@ -688,7 +668,7 @@ def compare(
             collect(*pending)
 
     if n == 0:
-        raise InputError(f"video {input_path} has no frames")
+        raise InputError(f"video {in_reader.info.path} has no frames")
     out_stats = _motion_stats(out_pairs, width, height, fps_out, n)
     in_stats = _motion_stats(in_pairs, width, height, fps_in, n)
     nan = float("nan")

@@ -15,18 +15,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from pipeline.metrics import iter_frames  # noqa: E402
+from pipeline.video_io import VideoReader  # noqa: E402
 
 FRAMES = (20, 55, 90)
 
 
 def frames_at(path: Path, wanted: tuple[int, ...]) -> list:
     picked = {}
-    for index, frame in enumerate(iter_frames(path)):
-        if index in wanted:
-            picked[index] = frame
-        if len(picked) == len(wanted):
-            break
+    with VideoReader(path) as reader:
+        for frame in reader:
+            if frame.index in wanted:
+                picked[frame.index] = frame.rgb
+            if len(picked) == len(wanted):
+                break
     return [picked[i] for i in wanted]
 
 
