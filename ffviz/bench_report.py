@@ -1,5 +1,7 @@
-"""The results of `ffviz bench`: the Markdown table, bench.md/csv/json, the plot and the targets block, and the
-dated report (docs/benchmarks.md in a source checkout) that says on what machine and versions they were measured."""
+"""The results of `ffviz bench`: the rows (BenchRow, which bench.py fills in while it measures), the Markdown
+table, bench.md/csv/json, the plot and the targets block, and the dated report (docs/benchmarks.md in a source
+checkout) that says on what machine and versions they were measured. Imports nothing of bench.py: bench.py
+imports the rows from here."""
 
 from __future__ import annotations
 
@@ -16,7 +18,64 @@ from importlib import metadata
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ffviz.bench import X264_ONLY, BenchRow
+X264_ONLY = "x264 only"  # the reference row's method name
+
+
+# -- rows: what bench measures, what the report shows --------------------------------------------------------
+
+@dataclass
+class Quality:
+    jitter_px: float | None
+    stab_T: float | None
+    stab_R: float | None
+    crop: float | None = None
+    distort: float | None = None
+    black: float | None = None
+    flicker: float | None = None  # synth_flicker_ratio: change of synthesized pixels over that of real ones
+
+
+@dataclass
+class BenchRow:
+    """One line of the table: a method's runs on a clip (medians over the repeats), or the clip's own measures."""
+
+    clip: str
+    method: str  # "input" for the input's own motion measures
+    width: int
+    height: int
+    frames: int
+    seconds_runs: list[float] = field(default_factory=list)
+    cpu_seconds_runs: list[float] = field(default_factory=list)
+    steal_runs: list[float] = field(default_factory=list)  # share of the machine's CPU time stolen, per run
+    peak_rss_bytes: int | None = None  # the largest over repeats
+    quality: Quality | None = None
+    error: str = ""
+    # What the method wrote: its video codec and the file's bitrate (kbit/s over its duration). Encoders cost
+    # very different CPU: the OpenCV sample writes XVID (FFmpeg's mpeg4, ~3 ms a 640x360 frame), the others
+    # x264 at CRF 18 (~38 ms).
+    codec: str | None = None
+    kbit_s: float | None = None
+
+    @property
+    def seconds(self) -> float | None:
+        return statistics.median(self.seconds_runs) if self.seconds_runs else None
+
+    @property
+    def cpu_seconds(self) -> float | None:
+        return statistics.median(self.cpu_seconds_runs) if self.cpu_seconds_runs else None
+
+    @property
+    def steal(self) -> float | None:
+        return statistics.median(self.steal_runs) if self.steal_runs else None
+
+    @property
+    def fps(self) -> float | None:
+        seconds = self.seconds
+        return self.frames / seconds if seconds else None
+
+    @property
+    def peak_mib(self) -> float | None:
+        return self.peak_rss_bytes / 2**20 if self.peak_rss_bytes is not None else None
+
 
 # (column, value of a row, format); None prints as "-".
 COLUMNS: tuple[tuple[str, Callable[[BenchRow], object], str], ...] = (

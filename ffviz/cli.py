@@ -9,19 +9,18 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shlex
-import shutil
 import signal
 import sys
 import traceback
 from pathlib import Path
 from typing import Sequence
 
+from ffviz.runner import DEFAULT_RECORDINGS, output_encoding, run_stabilize, stabilize_config
+from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (tests call cli.view_command)
 from pipeline import deblur, motion, smoothing, stabilize as stab, video_io
 from pipeline.errors import ConfigError, FFVizError
-from pipeline.observer import Observer, Observers
 
-DEFAULT_RECORDINGS = Path("recordings")
+_stabilize_config = stabilize_config  # the name tests/test_deblur.py uses
 
 
 class Terminated(BaseException):
@@ -217,142 +216,6 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "(default: one per CPU core, here %d)" % (os.cpu_count() or 1))
 
 
-MAX_RADIUS = 100_000  # frames; the smoothing kernel is allocated at 2k+1 taps
-MIN_SIGMA, MAX_SIGMA = 1e-6, 1e6  # frames
-
-
-def _check_options(args: argparse.Namespace) -> None:
-    """What the configs cannot check: values argparse parses but the run or the kernel cannot use (the
-    encoder's values are video_io.Encoding's to check)."""
-    if getattr(args, "workers", None) is not None and args.workers < 1:
-        raise ConfigError(f"--workers must be at least 1, not {args.workers}")
-    if args.smoothing_radius > MAX_RADIUS:
-        raise ConfigError(f"-k must be at most {MAX_RADIUS}, not {args.smoothing_radius}")
-    # Outside these the kernel's sigma**2 underflows (0/0) or overflows; the ends already mean none/uniform.
-    if args.smoothing_sigma is not None and not MIN_SIGMA <= args.smoothing_sigma <= MAX_SIGMA:  # False for nan
-        raise ConfigError(f"--smoothing-sigma must be between {MIN_SIGMA:g} and {MAX_SIGMA:g} frames, "
-                          f"not {args.smoothing_sigma}")
-
-
-def _stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
-    _check_options(args)
-    try:
-        return stab.StabilizeConfig(
-            mode=args.mode,
-            motion=motion.MotionConfig(model=args.motion_model, refine=args.refine),
-            smoothing=smoothing.SmoothingConfig(radius=args.smoothing_radius, sigma=args.smoothing_sigma),
-            deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
-        )
-    except ValueError as error:  # the configs validate their own values
-        raise ConfigError(str(error)) from None
-
-
-def output_encoding(args: argparse.Namespace) -> video_io.Encoding:
-    """--codec and the quality options that belong to it (one that belongs to another codec is an error)."""
-    own = video_io.CODEC_OPTIONS[args.codec]
-    every = [name for names in video_io.CODEC_OPTIONS.values() for name in names]
-    given = {name: getattr(args, name) for name in every if getattr(args, name) is not None}
-    stray = [f"--{name}" for name in given if name not in own]
-    if stray:
-        raise ConfigError(f"{' and '.join(stray)} {'does' if len(stray) == 1 else 'do'} not apply to --codec "
-                          f"{args.codec} (its options: {', '.join('--' + n for n in own)})")
-    try:
-        return video_io.Encoding(codec=args.codec, **given)
-    except ConfigError as error:
-        raise ConfigError(f"--{error}") from None
-
-
-def _recording_path(args: argparse.Namespace, input_path: Path) -> Path | None:
-    if args.rrd is None:
-        return None
-    if args.rrd == Path("AUTO"):
-        return DEFAULT_RECORDINGS / f"{input_path.stem}.rrd"
-    return args.rrd
-
-
-def view_command(recording: Path) -> str:
-    """A command that opens ``recording``, runnable as printed in the shell the user started ffviz from.
-
-    Under ./run (which exports FFVIZ_LAUNCHER, the script as the user typed it, and FFVIZ_USER_CWD): that script's
-    `view` verb and the path from the user's folder. Otherwise `ffviz` when the one on PATH is this one, else the
-    path of the script that is running (e.g. .venv/bin/ffviz), else `python -m ffviz.cli`."""
-    launcher, user_cwd = os.environ.get("FFVIZ_LAUNCHER"), os.environ.get("FFVIZ_USER_CWD")
-    if launcher and user_cwd:
-        return f"{shlex.quote(launcher)} view {shlex.quote(os.path.relpath(recording.absolute(), user_cwd))}"
-    script = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
-    if script is not None and script.name == "ffviz" and script.is_file():
-        on_path = shutil.which("ffviz")
-        if on_path is not None and Path(on_path).resolve() == script.resolve():
-            program = "ffviz"
-        else:
-            relative = os.path.relpath(script.absolute())
-            program = shlex.quote(relative if relative.startswith("../") is False and "/" in relative
-                                  else str(script.absolute()))
-    else:
-        program = f"{shlex.quote(sys.executable)} -m ffviz.cli"
-    return f"{program} view {shlex.quote(str(recording))}"
-
-
-def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace, *, overwrite: bool,
-                  observers: Sequence[Observer] = (), final_line: bool = True) -> stab.StabilizeReport:
-    """Stabilize with the CLI's options and print the report; ``final_line``: end with what was written where
-    and how to look at it (the demo prints its own)."""
-    from ffviz.progress import tqdm_progress
-
-    config = _stabilize_config(args)
-    encoding = output_encoding(args)
-    rrd_path = _recording_path(args, input_path)
-    recorder = None
-    if rrd_path is not None:
-        from ffviz.recorder import RerunRecorder
-
-        recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80,
-                                 trace_frames=args.frames)
-    try:
-        report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
-                                progress=tqdm_progress, overwrite=overwrite, encoding=encoding,
-                                workers=getattr(args, "workers", None))
-    except BaseException:
-        if recorder is not None:
-            recorder.abort()
-        raise
-    _print_report(report, rrd_path)
-    if final_line:
-        print(written_line([(report.output_path, "stabilized video")], rrd_path), flush=True)
-    return report
-
-
-def written_line(files: Sequence[tuple[Path, str]], rrd_path: Path | None) -> str:
-    """The last line of a run: what was written where, and how to look at it."""
-    what = [f"{path} ({label})" for path, label in files]
-    if rrd_path is not None:
-        what.append(f"{rrd_path} (recording)")
-        look = f"to look inside: {view_command(rrd_path)}"
-    else:
-        look = "play it in any video player (add --rrd to record every step for the viewer)"
-    return f"wrote {', '.join(what[:-1]) + ' and ' + what[-1] if len(what) > 1 else what[0]}; {look}"
-
-
-def _print_report(report: stab.StabilizeReport, rrd_path: Path | None) -> None:
-    lines = [f"stabilized {report.n_frames} frames in {report.seconds:.1f} s "
-             f"({report.n_frames / max(report.seconds, 1e-9):.1f} frames/s) -> {report.output_path}"]
-    if report.crop is not None:
-        lines.append(f"crop: kept {report.crop.cropping_ratio:.1%} of the frame area (scale {report.crop.scale:.3f})")
-    if report.cuts:
-        lines.append(f"scene cuts at frames {', '.join(map(str, report.cuts))}")
-    if report.warnings:
-        lines.append(f"{len(report.warnings)} warning(s), listed on stderr")
-    print("\n".join(lines), flush=True)
-    _print_warnings(report.warnings)
-
-
-def _print_warnings(warnings: Sequence[tuple[int | None, str]], limit: int = 5) -> None:
-    for frame, message in warnings[:limit]:
-        print(f"ffviz: warning: {message}" + (f" (frame {frame})" if frame is not None else ""), file=sys.stderr)
-    if len(warnings) > limit:
-        print(f"ffviz: warning: ... and {len(warnings) - limit} more", file=sys.stderr)
-
-
 def cmd_stabilize(args: argparse.Namespace) -> int:
     run_stabilize(args.input, args.output, args, overwrite=args.overwrite)
     return 0
@@ -413,7 +276,7 @@ def cmd_figures(args: argparse.Namespace) -> int:
 def cmd_batch(args: argparse.Namespace) -> int:
     from ffviz.batch import cmd_batch as run_batch
 
-    return run_batch(args, _stabilize_config(args), output_encoding(args))
+    return run_batch(args, stabilize_config(args), output_encoding(args))
 
 
 def cmd_bench(args: argparse.Namespace) -> int:

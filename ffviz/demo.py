@@ -3,18 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
 import numpy as np
 
+from ffviz.runner import recording_path, run_stabilize, written_line
 from pipeline import geometry, metrics, synthetic
 from pipeline.observer import StageCollector
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from ffviz.cli import _recording_path, run_stabilize, written_line
-
     out_dir = args.output_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     config = synthetic.SyntheticConfig(n_frames=args.num_frames, seed=args.seed)
@@ -40,7 +38,7 @@ def run_demo(args: argparse.Namespace) -> int:
     after = metrics.video_motion_stats(output_path)
     print(f"residual jitter: input {before.residual_jitter_px:.2f} px -> output {after.residual_jitter_px:.2f} px; "
           f"stability (translation): {before.stability_translation:.3f} -> {after.stability_translation:.3f}")
-    print(written_line([(input_path, "shaky input"), (output_path, "stabilized")], _recording_path(args, input_path)),
+    print(written_line([(input_path, "shaky input"), (output_path, "stabilized")], recording_path(args, input_path)),
           flush=True)
     return 0
 
