@@ -88,6 +88,7 @@ This module never imports rerun or matplotlib.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
@@ -166,12 +167,52 @@ class DeblurResult:
     neighbours: tuple[int, ...]  # offsets t'-t of the sharper neighbours that contributed
     weights: np.ndarray  # (H, W) float32 in [0, 1]: share of the output pixel that came from neighbours
     ratios: dict[int, float] = field(default_factory=dict)  # b_t / b_t' of every neighbour compared, by offset
-    # (H, W) int8: offset of the neighbour that gave the pixel the most weight, 0 where none gave any; None
-    # when no neighbour contributed.
-    main_source: np.ndarray | None = None
-    # (H, W) bool: pixels a sharper neighbour covered but was refused at (other content after alignment: a
-    # moving object, parallax, misregistration); None when no neighbour was sharper.
-    refused: np.ndarray | None = None
+    provenance: Provenance | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def main_source(self) -> np.ndarray | None:
+        """(H, W) int8: offset of the neighbour that gave the pixel the most weight, 0 where neighbours gave
+        under 5 %; None when no neighbour contributed."""
+        return None if self.provenance is None else self.provenance.main_source
+
+    @property
+    def refused(self) -> np.ndarray | None:
+        """(H, W) bool: pixels where a sharper neighbour was refused (other content after alignment: a moving
+        object, parallax, misregistration); None when no neighbour was sharper."""
+        return None if self.provenance is None else self.provenance.refused
+
+
+class Provenance:
+    """Where a deblurred frame's pixels came from, worked out when first asked for (by the recording; a run
+    that records nothing never pays for it) from the arrays eq. 30 was computed with."""
+
+    def __init__(self, taken: kernels.Contributions, alpha: np.float32, weights: np.ndarray | None,
+                 target_valid: np.ndarray) -> None:
+        count = taken.count
+        self._offsets = tuple(taken.offsets)
+        self._ratios, self._errors = taken.ratios[:count], taken.errors[:count]
+        self._rejected = None if taken.rejected is None else \
+            taken.rejected[:count][taken.has_rejected[:count].any(axis=1)]
+        self._alpha, self._weights, self._target_valid = alpha, weights, target_valid
+
+    @functools.cached_property
+    def main_source(self) -> np.ndarray | None:
+        """The neighbour with the largest eq. 31 weight, judged on the alignment error's grid (where a neighbour
+        was refused its error is REFUSED_ERROR, so it loses)."""
+        if self._weights is None:
+            return None
+        small = self._ratios[:, None, None] / (self._errors + self._alpha)  # eq. 31 up to the common alpha
+        offsets = np.asarray(self._offsets, np.int8)[np.argmax(small, axis=0)]
+        height, width = self._weights.shape
+        source = cv2.resize(offsets, (width, height), interpolation=cv2.INTER_NEAREST)
+        source[self._weights < 0.05] = 0
+        return source
+
+    @functools.cached_property
+    def refused(self) -> np.ndarray:
+        if self._rejected is None or len(self._rejected) == 0:
+            return np.zeros(self._target_valid.shape, bool)
+        return np.bitwise_or.reduce(self._rejected, axis=0).view(bool) & self._target_valid
 
 
 @dataclass(frozen=True)
@@ -417,33 +458,11 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
             frame, weights, counts = kernels.blend(target, *taken.arrays(), *grid.up_tables, alpha)  # eq. 30
             used = tuple(offset for offset, count in zip(taken.offsets, counts) if count > 0)
     if not used:
-        refused = _refused(taken, target_valid) if sharper else None
+        provenance = Provenance(taken, alpha, None, target_valid) if sharper else None
         return DeblurResult(target, target, blurriness_t, (), np.zeros((height, width), np.float32), dict(ratios),
-                            refused=refused)
+                            provenance)
     return DeblurResult(frame, target, blurriness_t, used, weights, dict(ratios),
-                        main_source=_main_source(taken, alpha, weights), refused=_refused(taken, target_valid))
-
-
-def _refused(taken: kernels.Contributions, target_valid: np.ndarray) -> np.ndarray:
-    """bool (H, W): pixels of the target where at least one sharper neighbour was refused."""
-    if taken.rejected is None or not taken.has_rejected[:taken.count].any():
-        return np.zeros(target_valid.shape, bool)
-    union = np.bitwise_or.reduce(taken.rejected[:taken.count][taken.has_rejected[:taken.count]], axis=0)
-    return union.view(bool) & target_valid
-
-
-def _main_source(taken: kernels.Contributions, alpha: np.float32,
-                 weights: np.ndarray) -> np.ndarray:
-    """(H, W) int8: per pixel, the offset of the neighbour with the largest eq. 31 weight, judged on the alignment
-    error's grid (where a neighbour was refused its error is REFUSED_ERROR, so it loses), 0 where neighbours gave
-    under 5 % of the pixel. For the record: what the viewer shows as where each pixel came from."""
-    count = taken.count
-    small = taken.ratios[:count, None, None] / (taken.errors[:count] + alpha)  # eq. 31 up to the common alpha
-    offsets = np.asarray(taken.offsets, np.int8)[np.argmax(small, axis=0)]
-    height, width = weights.shape
-    source = cv2.resize(offsets, (width, height), interpolation=cv2.INTER_NEAREST)
-    source[weights < 0.05] = 0
-    return source
+                        Provenance(taken, alpha, weights, target_valid))
 
 
 def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, frames: Mapping[int, np.ndarray],

@@ -472,8 +472,8 @@ def blend(target: np.ndarray, rgbs: np.ndarray, masks: np.ndarray, mask_index: n
            col_tap0: np.ndarray, col_tap1: np.ndarray, col_fraction: np.ndarray,
            alpha: np.float32) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eq. 30 row by row over every neighbour k: (I_t + sum_k w_k I_k) / (1 + sum_k w_k), with w_k of eq. 31 on
-    the pixels in k's row span, in masks[mask_index[k]] (rows not exacts[k]) and, where has_rejected[k], not in
-    rejecteds[k]; E_k is the low-res errors[k] upsampled as cv2.resize INTER_LINEAR would. Returns the frame
+    the pixels in k's row span, in masks[mask_index[k]] (rows not exacts[k]) and not in rejecteds[k] (looked at
+    on the rows has_rejected[k] marks); E_k is the low-res errors[k] upsampled as cv2.resize INTER_LINEAR would. Returns the frame
     (uint8, rounded), the share taken from neighbours 1 - 1 / (1 + sum w), and the number of pixels each
     neighbour gave weight to.
 
@@ -517,12 +517,17 @@ def blend(target: np.ndarray, rgbs: np.ndarray, masks: np.ndarray, mask_index: n
                     if not mask_row[x]:
                         weights[three * x:three * x + three] = zero  # adding 0 changes nothing
                         taken -= 1
-            if has_rejected[k]:
+            if has_rejected[k, y]:
                 rejected_row = rejecteds[k, y]
-                for x in range(a // three, b // three):
-                    if rejected_row[x] and weights[three * x] != zero:
-                        weights[three * x:three * x + three] = zero
-                        taken -= 1
+                dropped = np.int64(0)
+                for x in range(a // three, b // three):  # branch-free, so that it vectorises
+                    hit = np.int64(rejected_row[x] != 0) & np.int64(weights[three * x] != zero)
+                    keep = one - np.float32(rejected_row[x] != 0)
+                    dropped += hit
+                    weights[three * x] *= keep
+                    weights[three * x + 1] *= keep
+                    weights[three * x + 2] *= keep
+                taken -= dropped
             counts[k] += taken
             rgb_row = rgbs[k, y].reshape(samples)
             for i in range(a, b):
@@ -553,7 +558,7 @@ class Contributions:
         self.masks = [target_valid]  # a neighbour's valid pixels: the target's, or one of its own (warped given)
         self.mask_index = np.zeros(capacity, np.int64)
         self.rejected: np.ndarray | None = None  # zeros until written; made on first need
-        self.has_rejected = np.zeros(capacity, np.bool_)
+        self.has_rejected = np.zeros((capacity, height), np.bool_)  # rows of rejected[k] with a pixel set
 
     def next_rgb(self) -> np.ndarray:
         return self.rgbs[self.count]
@@ -571,7 +576,7 @@ class Contributions:
         if mask is not None:
             self.mask_index[k] = len(self.masks)
             self.masks.append(mask)
-        self.has_rejected[k] = has_rejected
+        self.has_rejected[k] = self.rejected[k].any(axis=1) if has_rejected else False
         self.errors[k] = error
         self.ratios[k] = ratio
         self.count += 1
