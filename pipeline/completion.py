@@ -49,6 +49,7 @@ import numpy as np
 from numba import njit
 
 from pipeline import fallback, fmm, geometry, local_flow, mosaic
+from pipeline.errors import ConfigError
 from pipeline.neighbours import WarpedNeighbour, shrink, shrink_all, shrink_any
 
 # What filled each pixel (CompletionResult.source).
@@ -86,13 +87,13 @@ class CompletionConfig:
 
     def __post_init__(self) -> None:
         if self.radius < 0:
-            raise ValueError(f"completion radius must be >= 0, not {self.radius}")
+            raise ConfigError(f"completion radius must be >= 0, not {self.radius}")
         if self.max_warp_neighbours < 0:
-            raise ValueError(f"max_warp_neighbours must be >= 0, not {self.max_warp_neighbours}")
+            raise ConfigError(f"max_warp_neighbours must be >= 0, not {self.max_warp_neighbours}")
         if self.flow_max_side is not None and self.flow_max_side < 32:
-            raise ValueError(f"flow_max_side must be at least 32 px, not {self.flow_max_side}")
+            raise ConfigError(f"flow_max_side must be at least 32 px, not {self.flow_max_side}")
         if self.residual_radius < 0:
-            raise ValueError(f"residual_radius must be >= 0, not {self.residual_radius}")
+            raise ConfigError(f"residual_radius must be >= 0, not {self.residual_radius}")
 
 
 @dataclass(frozen=True)

@@ -98,6 +98,7 @@ import numpy as np
 
 from pipeline import deblur_kernels as kernels
 from pipeline import geometry, smoothing, warping
+from pipeline.errors import ConfigError
 from pipeline.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
 from pipeline.mosaic import INTENSITY_WEIGHTS, intensity
 from pipeline.window import PerFrame
@@ -143,20 +144,20 @@ class DeblurConfig:
 
     def __post_init__(self) -> None:
         if not (self.alpha > 0 and math.isfinite(self.alpha)):
-            raise ValueError(f"deblur alpha must be a positive number, not {self.alpha}")
+            raise ConfigError(f"deblur alpha must be a positive number, not {self.alpha}")
         if self.radius < 0:
-            raise ValueError(f"deblur radius must be >= 0, not {self.radius}")
+            raise ConfigError(f"deblur radius must be >= 0, not {self.radius}")
         if not self.min_ratio >= 1.0:
-            raise ValueError(f"deblur min_ratio must be >= 1 (only sharper neighbours may contribute), "
+            raise ConfigError(f"deblur min_ratio must be >= 1 (only sharper neighbours may contribute), "
                              f"not {self.min_ratio}")
         if not self.error_sigma_px >= 0 or self.reject_grow_px < 0:
-            raise ValueError("deblur error_sigma_px and reject_grow_px must be >= 0")
+            raise ConfigError("deblur error_sigma_px and reject_grow_px must be >= 0")
         if not self.reject_error > 0:
-            raise ValueError(f"deblur reject_error must be positive, not {self.reject_error}")
+            raise ConfigError(f"deblur reject_error must be positive, not {self.reject_error}")
         if self.structure_min is not None and not -1.0 <= self.structure_min <= 1.0:
-            raise ValueError(f"deblur structure_min must lie in [-1, 1] or be None, not {self.structure_min}")
+            raise ConfigError(f"deblur structure_min must lie in [-1, 1] or be None, not {self.structure_min}")
         if self.structure_window_px < 1:
-            raise ValueError(f"deblur structure_window_px must be >= 1, not {self.structure_window_px}")
+            raise ConfigError(f"deblur structure_window_px must be >= 1, not {self.structure_window_px}")
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,11 @@ class OutputError(FFVizError):
     exit_code = 3
 
 
-class ConfigError(FFVizError):
-    """An option value that makes no sense (negative radius, unknown model, ...)."""
+class ConfigError(FFVizError, ValueError):
+    """An option value that makes no sense (negative radius, unknown model, ...).
+
+    Every config dataclass raises it from ``__post_init__``, so a bad value fails where the config is built.
+    Also a ValueError: code that caught the ValueError configs raised before keeps working.
+    """
 
     exit_code = 2

@@ -55,6 +55,7 @@ import cv2
 import numpy as np
 from numba import njit
 
+from pipeline.errors import ConfigError
 from pipeline.mosaic import intensity
 
 METHODS: tuple[str, ...] = ("dis", "farneback", "lk")
@@ -89,9 +90,9 @@ class LocalFlowConfig:
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
-            raise ValueError(f"local flow method must be one of {', '.join(METHODS)}, not {self.method!r}")
+            raise ConfigError(f"local flow method must be one of {', '.join(METHODS)}, not {self.method!r}")
         if self.dis_preset not in DIS_PRESETS:
-            raise ValueError(f"DIS preset must be one of {', '.join(DIS_PRESETS)}, not {self.dis_preset!r}")
+            raise ConfigError(f"DIS preset must be one of {', '.join(DIS_PRESETS)}, not {self.dis_preset!r}")
 
 
 @dataclass(frozen=True)

@@ -129,7 +129,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from pipeline import video_io
-from pipeline.errors import InputError
+from pipeline.errors import ConfigError, InputError
 
 _MIN_INLIERS = 8
 # a step between neighbouring frames beyond these is a scene cut or a bogus fit, not camera motion
@@ -153,9 +153,9 @@ class MetricsConfig:
 
     def __post_init__(self) -> None:
         if self.feature not in ("sift", "orb"):
-            raise ValueError(f"feature must be 'sift' or 'orb', not {self.feature!r}")
+            raise ConfigError(f"feature must be 'sift' or 'orb', not {self.feature!r}")
         if self.max_side < 16:
-            raise ValueError(f"max_side must be at least 16, not {self.max_side}")
+            raise ConfigError(f"max_side must be at least 16, not {self.max_side}")
 
 
 def _clean(value):

@@ -50,6 +50,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from pipeline.errors import ConfigError
+
 INTENSITY_WEIGHTS = np.array([0.30, 0.59, 0.11], np.float32)  # thesis 4.2.1 (after [17])
 
 
@@ -62,9 +64,9 @@ class MosaicConfig:
 
     def __post_init__(self) -> None:
         if self.min_neighbours < 2:
-            raise ValueError(f"min_neighbours must be >= 2 (eq. 20 divides by n-1), not {self.min_neighbours}")
+            raise ConfigError(f"min_neighbours must be >= 2 (eq. 20 divides by n-1), not {self.min_neighbours}")
         if not self.variance_threshold > 0:
-            raise ValueError(f"variance_threshold must be positive, not {self.variance_threshold}")
+            raise ConfigError(f"variance_threshold must be positive, not {self.variance_threshold}")
 
 
 @dataclass(frozen=True)

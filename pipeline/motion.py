@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from pipeline import geometry
+from pipeline.errors import ConfigError
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
@@ -53,9 +54,9 @@ class MotionConfig:
 
     def __post_init__(self) -> None:
         if self.model not in MOTION_MODELS:
-            raise ValueError(f"motion model must be one of {', '.join(MOTION_MODELS)}, not {self.model!r}")
+            raise ConfigError(f"motion model must be one of {', '.join(MOTION_MODELS)}, not {self.model!r}")
         if self.refine not in REFINEMENTS:
-            raise ValueError(f"refinement must be one of {', '.join(REFINEMENTS)}, not {self.refine!r}")
+            raise ConfigError(f"refinement must be one of {', '.join(REFINEMENTS)}, not {self.refine!r}")
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from pipeline import geometry
+from pipeline.errors import ConfigError
 
 DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
 
@@ -29,9 +30,9 @@ class SmoothingConfig:
 
     def __post_init__(self) -> None:
         if self.radius < 0:
-            raise ValueError(f"smoothing radius must be >= 0, not {self.radius}")
+            raise ConfigError(f"smoothing radius must be >= 0, not {self.radius}")
         if self.sigma is not None and self.sigma <= 0:
-            raise ValueError(f"smoothing sigma must be > 0, not {self.sigma}")
+            raise ConfigError(f"smoothing sigma must be > 0, not {self.sigma}")
 
     @property
     def effective_sigma(self) -> float:

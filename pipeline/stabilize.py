@@ -20,7 +20,7 @@ import numpy as np
 from pipeline import completion, deblur, motion, neighbours, parallel, smoothing, video_io, warping
 from pipeline.source import FileSource, FrameSource, PrefetchedSource, one_pass
 from pipeline.window import Windowed, sliding_window
-from pipeline.errors import InputError
+from pipeline.errors import ConfigError, InputError
 from pipeline.observer import NullObserver, Observer, ProgressFactory, Stamp, is_null, null_progress
 
 OutputMode = Literal["full", "none", "crop"]
@@ -37,7 +37,7 @@ class StabilizeConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in OUTPUT_MODES:
-            raise ValueError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
+            raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
 
 
 @dataclass

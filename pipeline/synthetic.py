@@ -43,6 +43,8 @@ from typing import Iterable, Iterator
 import cv2
 import numpy as np
 
+from pipeline.errors import ConfigError
+
 __all__ = [
     "SyntheticConfig",
     "SyntheticVideo",
@@ -104,6 +106,17 @@ class SyntheticConfig:
     # World canvas.
     world_margin: float = 0.12  # extra world around every (actual and intended) view, as a fraction of W and H
     min_world_scale: float = 1.0  # the photograph is upscaled by at least this factor
+
+    def __post_init__(self) -> None:
+        w, h, n, fps = int(self.width), int(self.height), int(self.n_frames), float(self.fps)
+        if w < 8 or h < 8 or n < 1 or not fps > 0:  # "not >" also refuses NaN
+            raise ConfigError(f"bad synthetic config: {w}x{h}, {n} frames at {fps} fps (needs >= 8x8, >= 1 frame, "
+                              f"fps > 0)")
+        if self.object_kind not in ("disc", "person"):
+            raise ConfigError(f"object_kind must be 'disc' or 'person', not {self.object_kind!r}")
+        for i in self.blurred_frames or ():
+            if not 0 <= int(i) < n:
+                raise ConfigError(f"blurred frame index {i} outside 0..{n - 1}")
 
 
 @dataclass
@@ -516,11 +529,7 @@ def _check_coverage(world_shape: tuple[int, ...], frame_from_world: np.ndarray, 
 def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
     """Render a synthetic hand-held clip and its truth; deterministic given the config (seed included)."""
     cfg = config
-    w, h, n, fps = int(cfg.width), int(cfg.height), int(cfg.n_frames), float(cfg.fps)
-    if w < 8 or h < 8 or n < 1 or fps <= 0:
-        raise ValueError(f"bad synthetic config: {w}x{h}, {n} frames at {fps} fps")
-    if cfg.object_kind not in ("disc", "person"):
-        raise ValueError(f"object_kind must be 'disc' or 'person', not {cfg.object_kind!r}")
+    w, h, n, fps = int(cfg.width), int(cfg.height), int(cfg.n_frames), float(cfg.fps)  # checked by the config
     rng = np.random.default_rng(cfg.seed)
     fc = ((w - 1) / 2.0, (h - 1) / 2.0)
     t = np.arange(n, dtype=np.float64)
@@ -574,9 +583,6 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
 
     # Render.
     blurred = default_blurred_frames(n) if cfg.blurred_frames is None else tuple(sorted(set(int(i) for i in cfg.blurred_frames)))
-    for i in blurred:
-        if not 0 <= i < n:
-            raise ValueError(f"blurred frame index {i} outside 0..{n - 1}")
     kernel = motion_blur_kernel(cfg.blur_length_px, cfg.blur_angle_deg)
     blurred_set = set(blurred)
     canvas = world.copy()
@@ -659,9 +665,7 @@ def stream_frames(config: SyntheticConfig) -> Iterator[np.ndarray]:
     cfg = config
     if cfg.pan_px_per_frame != 0 or cfg.moving_object or cfg.blurred_frames != ():
         raise ValueError("stream_frames needs pan_px_per_frame=0, moving_object=False and blurred_frames=()")
-    w, h, n, fps = int(cfg.width), int(cfg.height), int(cfg.n_frames), float(cfg.fps)
-    if w < 8 or h < 8 or n < 1 or fps <= 0:
-        raise ValueError(f"bad synthetic config: {w}x{h}, {n} frames at {fps} fps")
+    w, h, n, fps = int(cfg.width), int(cfg.height), int(cfg.n_frames), float(cfg.fps)  # checked by the config
     rng = np.random.default_rng(cfg.seed)
     fc = ((w - 1) / 2.0, (h - 1) / 2.0)
     (drift_x, drift_y, roll), (jx, jy, jth, jzm) = _drift_and_jitter(cfg, rng, n, fps)

@@ -1,0 +1,74 @@
+"""Bad configuration raises ConfigError, from every config dataclass, where the config is built.
+
+ConfigError is an FFVizError (the CLI prints it on one line, exit status 2) and a ValueError (what the configs
+raised before, so existing `except ValueError` callers keep working).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+from pipeline import completion, deblur, fmm, local_flow, metrics, mosaic, motion, smoothing, stabilize, synthetic
+from pipeline import video_io
+from pipeline.errors import ConfigError, FFVizError
+
+REPO = Path(__file__).resolve().parents[1]
+
+# config class -> keyword arguments that each make it invalid
+BAD = {
+    completion.CompletionConfig: [dict(radius=-1), dict(max_warp_neighbours=-1), dict(flow_max_side=8),
+                                  dict(residual_radius=-1)],
+    deblur.DeblurConfig: [dict(alpha=0.0), dict(radius=-1), dict(min_ratio=0.5), dict(error_sigma_px=-1.0),
+                          dict(reject_error=0.0), dict(structure_min=2.0), dict(structure_window_px=0)],
+    fmm.MotionInpaintConfig: [dict(radius=0), dict(colour_epsilon=0.0)],
+    local_flow.LocalFlowConfig: [dict(method="nope"), dict(dis_preset="nope")],
+    metrics.MetricsConfig: [dict(feature="surf"), dict(max_side=8)],
+    mosaic.MosaicConfig: [dict(min_neighbours=1), dict(variance_threshold=0.0)],
+    motion.MotionConfig: [dict(model="nope"), dict(refine="nope")],
+    smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0)],
+    stabilize.StabilizeConfig: [dict(mode="nope")],
+    synthetic.SyntheticConfig: [dict(width=4), dict(n_frames=0), dict(fps=0.0), dict(fps=float("nan")),
+                                dict(object_kind="cat"), dict(n_frames=6, blurred_frames=(6,))],
+    video_io.Encoding: [dict(codec="nope"), dict(crf=52), dict(preset="nope"), dict(qscale=1)],
+}
+CASES = [(cls, kwargs) for cls, bad in BAD.items() for kwargs in bad]
+
+
+def test_config_error_is_an_ffviz_error_and_a_value_error():
+    assert issubclass(ConfigError, FFVizError) and issubclass(ConfigError, ValueError)
+    assert ConfigError.exit_code == 2
+
+
+@pytest.mark.parametrize("cls, kwargs", CASES, ids=[f"{c.__name__}-{next(iter(k))}" for c, k in CASES])
+def test_bad_value_raises_config_error(cls, kwargs):
+    cls()  # the defaults are valid
+    with pytest.raises(ConfigError) as info:
+        cls(**kwargs)
+    assert "\n" not in str(info.value)
+
+
+def _validated_classes() -> dict[str, list[str]]:
+    """'module.Class' -> what each raise statement in its __post_init__ raises, for pipeline/ and ffviz/."""
+    found = {}
+    for package in ("pipeline", "ffviz"):
+        for path in sorted((REPO / package).glob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not isinstance(node, ast.ClassDef):
+                    continue
+                for method in node.body:
+                    if isinstance(method, ast.FunctionDef) and method.name == "__post_init__":
+                        raised = [ast.unparse(r.exc.func if isinstance(r.exc, ast.Call) else r.exc)
+                                  for r in ast.walk(method) if isinstance(r, ast.Raise) and r.exc is not None]
+                        found[f"{package}.{path.stem}.{node.name}"] = raised
+    return found
+
+
+def test_every_validating_dataclass_raises_config_error_and_is_tested_here():
+    found = _validated_classes()
+    wrong = {name: raised for name, raised in found.items() if set(raised) - {"ConfigError"}}
+    assert not wrong, f"__post_init__ must raise ConfigError: {wrong}"
+    tested = {f"{cls.__module__}.{cls.__name__}" for cls in BAD}
+    assert set(found) <= tested, f"add a bad value for {sorted(set(found) - tested)} to BAD"
