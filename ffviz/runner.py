@@ -43,7 +43,8 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
         return stab.StabilizeConfig(
             mode=args.mode,
             motion=motion.MotionConfig(model=args.motion_model, refine=args.refine),
-            smoothing=smoothing.SmoothingConfig(radius=args.smoothing_radius, sigma=args.smoothing_sigma),
+            smoothing=smoothing.SmoothingConfig(radius=args.smoothing_radius, sigma=args.smoothing_sigma,
+                                                path=getattr(args, "path", "gaussian")),
             deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
         )
     except ValueError as error:  # the configs validate their own values

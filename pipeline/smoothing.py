@@ -17,18 +17,25 @@ from typing import Sequence
 
 import numpy as np
 
-from pipeline import geometry
+from pipeline import geometry, l1_path
 from pipeline.errors import ConfigError
 
 DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
+
+
+PATHS = ("gaussian", "l1")
 
 
 @dataclass(frozen=True)
 class SmoothingConfig:
     radius: int = DEFAULT_RADIUS  # k: neighbours on each side
     sigma: float | None = None  # Gaussian sigma in frames; None -> sqrt(k) as in the thesis
+    path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/l1_path.py)
+    l1: l1_path.L1PathConfig = l1_path.L1PathConfig()  # its bounds, when path is "l1"
 
     def __post_init__(self) -> None:
+        if self.path not in PATHS:
+            raise ConfigError(f"smoothing path must be one of {', '.join(PATHS)}, not {self.path!r}")
         if self.radius < 0:
             raise ConfigError(f"smoothing radius must be >= 0, not {self.radius}")
         if self.sigma is not None and self.sigma <= 0:
@@ -85,6 +92,11 @@ def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig
     segment_of = np.searchsorted(segment_starts, np.arange(n_frames), side="right") - 1
     segment_end = [*(s - 1 for s in segment_starts[1:]), n_frames - 1]
 
+    if config.path == "l1":
+        orig_from_stab = _l1_paths(curr_from_prev, segment_starts, segment_end, config.l1, width, height)
+        original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
+        return SmoothingResult(orig_from_stab, segment_starts, original, smoothed)
+
     radius = config.radius
     kernel = gaussian_weights(radius, config.effective_sigma)
     prev_from_curr = np.linalg.inv(curr_from_prev)
@@ -101,6 +113,20 @@ def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig
 
     original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
     return SmoothingResult(orig_from_stab, segment_starts, original, smoothed)
+
+
+def _l1_paths(curr_from_prev: np.ndarray, segment_starts: Sequence[int], segment_end: Sequence[int],
+              config: l1_path.L1PathConfig, width: int, height: int) -> np.ndarray:
+    """S_t of the L1-optimal path, shot by shot (each from its own accumulated path)."""
+    orig_from_stab = np.empty((len(curr_from_prev), 3, 3))
+    for first, last in zip(segment_starts, segment_end):
+        first_from_t = np.empty((last - first + 1, 3, 3))
+        first_from_t[0] = geometry.IDENTITY
+        for t in range(first + 1, last + 1):
+            m = first_from_t[t - first - 1] @ np.linalg.inv(curr_from_prev[t])
+            first_from_t[t - first] = m / m[2, 2]
+        orig_from_stab[first:last + 1] = l1_path.orig_from_stab(first_from_t, config, max(width, 1), max(height, 1))
+    return orig_from_stab
 
 
 def trajectories(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_starts: Sequence[int],

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import completion, deblur, fmm, local_flow, metrics, mosaic, motion, smoothing, stabilize, synthetic
+from pipeline import completion, deblur, fmm, l1_path, local_flow, metrics, mosaic, motion, smoothing, stabilize
+from pipeline import synthetic
 from pipeline import video_io
 from pipeline.errors import ConfigError, FFVizError
 
@@ -28,7 +29,9 @@ BAD = {
     metrics.MetricsConfig: [dict(feature="surf"), dict(max_side=8)],
     mosaic.MosaicConfig: [dict(min_neighbours=1), dict(variance_threshold=0.0)],
     motion.MotionConfig: [dict(model="nope"), dict(refine="nope")],
-    smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0)],
+    smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0), dict(path="nope")],
+    l1_path.L1PathConfig: [dict(margin_fraction=0.0), dict(margin_deg=-1.0), dict(window=4), dict(overlap=2),
+                           dict(window=100, overlap=60)],
     stabilize.StabilizeConfig: [dict(mode="nope")],
     synthetic.SyntheticConfig: [dict(width=4), dict(n_frames=0), dict(fps=0.0), dict(fps=float("nan")),
                                 dict(object_kind="cat"), dict(n_frames=6, blurred_frames=(6,))],
