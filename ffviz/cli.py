@@ -170,7 +170,7 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                    help="width of that Gaussian, in frames (default: sqrt(K))")
     p.add_argument("--path", choices=smoothing.PATHS, default="gaussian",
                    help="camera path planner: gaussian (eq. 18, with -k) or l1 (L1-optimal path of still, "
-                        "constant-velocity and constant-acceleration pieces, each frame within 6%% of the frame "
+                        "constant-velocity and constant-acceleration pieces, each frame within 3%% of the frame "
                         "size, 2 degrees and 4%% zoom of its input; -k unused) (default: %(default)s)")
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
                    help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "

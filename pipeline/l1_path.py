@@ -39,7 +39,7 @@ WEIGHTS = (10.0, 1.0, 100.0)
 class L1PathConfig:
     """How far an output frame may depart from its input, per parameter, and the program's window."""
 
-    margin_fraction: float = 0.06  # translation bound as a fraction of the frame's width (x) and height (y)
+    margin_fraction: float = 0.03  # translation bound as a fraction of the frame's width (x) and height (y)
     margin_deg: float = 2.0  # rotation bound
     margin_scale: float = 0.04  # relative zoom bound
     window: int = 600  # frames per program; longer shots are solved in overlapping windows
