@@ -169,9 +169,17 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
                    help="width of that Gaussian, in frames (default: sqrt(K))")
     p.add_argument("--path", choices=smoothing.PATHS, default="gaussian",
-                   help="camera path planner: gaussian (eq. 18, with -k) or l1 (L1-optimal path of still, "
-                        "constant-velocity and constant-acceleration pieces, each frame within 3%% of the frame "
-                        "size, 2 degrees and 4%% zoom of its input; -k unused) (default: %(default)s)")
+                   help="camera path planner: gaussian (eq. 18, with -k); l1 (L1-optimal path of still, "
+                        "constant-velocity and constant-acceleration pieces, each frame within 3%% of the frame's "
+                        "longer side, 2 degrees and 4%% zoom of its input; -k unused); tripod (see --tripod) "
+                        "(default: %(default)s)")
+    p.add_argument("--tripod", action="store_true",
+                   help="hold the camera still (same as --path tripod): the output does not move while a still "
+                        "view stays within 10%% of the frame, 4 degrees and 8%% zoom of every input frame; where the "
+                        "camera went further the view follows it as little as it can, and a warning says where")
+    p.add_argument("--horizon-lock", action="store_true",
+                   help="keep the output's rotation at that of each shot's first frame, with any --path "
+                        "(the turned frames' corners are completed, or cropped with --mode crop)")
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
                    help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "
                         "shear) or homography (also perspective) (default: %(default)s)")

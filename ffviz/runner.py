@@ -29,6 +29,8 @@ def _check_options(args: argparse.Namespace) -> None:
     encoder's values are video_io.Encoding's to check)."""
     if getattr(args, "workers", None) is not None and args.workers < 1:
         raise ConfigError(f"--workers must be at least 1, not {args.workers}")
+    if getattr(args, "tripod", False) and getattr(args, "path", "gaussian") not in ("gaussian", "tripod"):
+        raise ConfigError(f"--tripod holds the camera still; it cannot be combined with --path {args.path}")
     if args.smoothing_radius > MAX_RADIUS:
         raise ConfigError(f"-k must be at most {MAX_RADIUS}, not {args.smoothing_radius}")
     # Outside these the kernel's sigma**2 underflows (0/0) or overflows; the ends already mean none/uniform.
@@ -43,8 +45,10 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
         return stab.StabilizeConfig(
             mode=args.mode,
             motion=motion.MotionConfig(model=args.motion_model, refine=args.refine),
-            smoothing=smoothing.SmoothingConfig(radius=args.smoothing_radius, sigma=args.smoothing_sigma,
-                                                path=getattr(args, "path", "gaussian")),
+            smoothing=smoothing.SmoothingConfig(
+                radius=args.smoothing_radius, sigma=args.smoothing_sigma,
+                path="tripod" if getattr(args, "tripod", False) else getattr(args, "path", "gaussian"),
+                horizon_lock=getattr(args, "horizon_lock", False)),
             deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
         )
     except ValueError as error:  # the configs validate their own values

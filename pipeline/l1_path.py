@@ -33,17 +33,29 @@ from pipeline.errors import ConfigError
 
 # Grundmann et al.'s weights: constant-velocity and constant-acceleration pieces are cheap, jerk is expensive.
 WEIGHTS = (10.0, 1.0, 100.0)
+# Tripod: how far a held frame may depart from its input before the path has to move (completion fills the rest).
+TRIPOD_MARGIN_FRACTION = 0.1
+TRIPOD_MARGIN_DEG = 4.0
+TRIPOD_MARGIN_SCALE = 0.08
 
 
 @dataclass(frozen=True)
 class L1PathConfig:
     """How far an output frame may depart from its input, per parameter, and the program's window."""
 
-    margin_fraction: float = 0.03  # translation bound as a fraction of the frame's width (x) and height (y)
+    margin_fraction: float = 0.03  # translation bound (x and y) as a fraction of the frame's longer side
     margin_deg: float = 2.0  # rotation bound
     margin_scale: float = 0.04  # relative zoom bound
     window: int = 600  # frames per program; longer shots are solved in overlapping windows
     overlap: int = 90  # frames a window shares with the previous one (the first half pinned)
+    weights: tuple[float, float, float] = WEIGHTS  # of |D P|, |D^2 P|, |D^3 P|
+
+    @classmethod
+    def tripod(cls) -> L1PathConfig:
+        """The camera held still: only |D P| costs, so the path is constant wherever a constant stays within
+        the (wider) margin, and moves, by as little as it can, only where the input camera went further."""
+        return cls(margin_fraction=TRIPOD_MARGIN_FRACTION, margin_deg=TRIPOD_MARGIN_DEG,
+                   margin_scale=TRIPOD_MARGIN_SCALE, weights=(1.0, 0.0, 0.0))
 
     def __post_init__(self) -> None:
         if not (self.margin_fraction > 0 and self.margin_deg > 0 and self.margin_scale > 0):
@@ -140,10 +152,11 @@ def similarity(parameters: np.ndarray, width: int, height: int) -> np.ndarray:
 def orig_from_stab(first_from_t: np.ndarray, config: L1PathConfig, width: int, height: int) -> np.ndarray:
     """(N, 3, 3) corrections S_t of one shot from its accumulated path ``first_from_t`` (N, 3, 3)."""
     original = similarity_parameters(first_from_t, width, height)
-    margins = (config.margin_fraction * width, config.margin_fraction * height, math.radians(config.margin_deg),
+    side = max(width, height)  # the same bound in px for x and y: the area left to complete is what it costs
+    margins = (config.margin_fraction * side, config.margin_fraction * side, math.radians(config.margin_deg),
                math.log1p(config.margin_scale))
-    smooth = np.column_stack([plan(original[:, i], margins[i], window=config.window, overlap=config.overlap)
-                              for i in range(4)])
+    smooth = np.column_stack([plan(original[:, i], margins[i], config.weights, window=config.window,
+                                   overlap=config.overlap) for i in range(4)])
     out = np.empty_like(first_from_t)
     for t in range(len(first_from_t)):
         # Only the similarity parts: the accumulated shear or perspective of a long shot drifts with the

@@ -131,6 +131,8 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
                                 width=info.width, height=info.height)
     observer.on_stage("smoothing", None, smoothed)
+    for message in smoothing.path_warnings(smoothed, config.smoothing):
+        stab.add_warning(warnings, observer, message)
     orig_from_out, crop, crop_warning = stab.output_transforms(smoothed.orig_from_stab, config.mode,
                                                                info.width, info.height)
     if crop_warning:

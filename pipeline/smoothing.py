@@ -23,15 +23,17 @@ from pipeline.errors import ConfigError
 DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
 
 
-PATHS = ("gaussian", "l1")
+PATHS = ("gaussian", "l1", "tripod")
+TRIPOD_STILL = 0.05  # px or degrees a frame: a tripod path moving more than this is following the camera
 
 
 @dataclass(frozen=True)
 class SmoothingConfig:
     radius: int = DEFAULT_RADIUS  # k: neighbours on each side
     sigma: float | None = None  # Gaussian sigma in frames; None -> sqrt(k) as in the thesis
-    path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/l1_path.py)
+    path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/l1_path.py); "tripod": held
     l1: l1_path.L1PathConfig = l1_path.L1PathConfig()  # its bounds, when path is "l1"
+    horizon_lock: bool = False  # the output keeps the rotation of each shot's first frame (any path)
 
     def __post_init__(self) -> None:
         if self.path not in PATHS:
@@ -92,10 +94,10 @@ def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig
     segment_of = np.searchsorted(segment_starts, np.arange(n_frames), side="right") - 1
     segment_end = [*(s - 1 for s in segment_starts[1:]), n_frames - 1]
 
-    if config.path == "l1":
-        orig_from_stab = _l1_paths(curr_from_prev, segment_starts, segment_end, config.l1, width, height)
-        original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
-        return SmoothingResult(orig_from_stab, segment_starts, original, smoothed)
+    if config.path != "gaussian":
+        planner = l1_path.L1PathConfig.tripod() if config.path == "tripod" else config.l1
+        orig_from_stab = _l1_paths(curr_from_prev, segment_starts, segment_end, planner, width, height)
+        return _finish(curr_from_prev, orig_from_stab, segment_starts, config, width, height)
 
     radius = config.radius
     kernel = gaussian_weights(radius, config.effective_sigma)
@@ -111,8 +113,47 @@ def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig
         s_t = sum(w * t_from[i] for w, i in zip(weights, range(first, last + 1)))
         orig_from_stab[t] = s_t / s_t[2, 2]
 
+    return _finish(curr_from_prev, orig_from_stab, segment_starts, config, width, height)
+
+
+def path_warnings(result: SmoothingResult, config: SmoothingConfig) -> list[str]:
+    """What a user should hear about the planned path: a tripod that had to move (the input camera went further
+    than the held view can reach), as frame ranges."""
+    if config.path != "tripod":
+        return []
+    moving = np.flatnonzero(np.abs(np.diff(result.smoothed_trajectory, axis=0)).max(axis=1) > TRIPOD_STILL)
+    if moving.size == 0:
+        return []
+    starts = set(result.segment_starts)
+    ranges, first, last = [], moving[0], moving[0]
+    for t in moving[1:]:
+        if t != last + 1:
+            ranges.append((first, last + 1))
+            first = t
+        last = t
+    ranges.append((first, last + 1))
+    shown = ", ".join(f"{a}-{b}" for a, b in ranges[:5] if b not in starts) + (" ..." if len(ranges) > 5 else "")
+    return [f"tripod: the camera moved further than a still view can reach; the view follows it in frames {shown}"]
+
+
+def _finish(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_starts: Sequence[int],
+            config: SmoothingConfig, width: int, height: int) -> SmoothingResult:
+    """The result with its trajectories; with horizon lock, each S_t first turned about the frame centre so
+    that the output's rotation (relative to its shot's first frame) is 0."""
     original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
+    if config.horizon_lock:
+        centre = ((width - 1) / 2.0, (height - 1) / 2.0)
+        for t in range(len(orig_from_stab)):
+            turned = orig_from_stab[t] @ _rotation_about(-math.radians(smoothed[t, 2]), centre)
+            orig_from_stab[t] = turned / turned[2, 2]
+        original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
     return SmoothingResult(orig_from_stab, segment_starts, original, smoothed)
+
+
+def _rotation_about(angle: float, centre: tuple[float, float]) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    cx, cy = centre
+    return np.array([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy], [0.0, 0.0, 1.0]])
 
 
 def _l1_paths(curr_from_prev: np.ndarray, segment_starts: Sequence[int], segment_end: Sequence[int],

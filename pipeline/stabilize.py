@@ -199,6 +199,8 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
     observer.on_stage("smoothing", None, smoothed)
     orig_from_out, crop, crop_warning = output_transforms(smoothed.orig_from_stab, config.mode, info.width, info.height)
     warnings = list(motion_pass.warnings)
+    for message in smoothing.path_warnings(smoothed, config.smoothing):
+        add_warning(warnings, observer, message)
     if crop_warning:
         add_warning(warnings, observer, crop_warning)
     if crop is not None:
