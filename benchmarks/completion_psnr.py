@@ -5,7 +5,13 @@ Ground truth (pipeline/evaluation.py):
 - jittered 80 % crops of the real clips in ../shared/videos (skipped when absent): the wide frame is the truth.
 Then frames per second of full mode at 640x360 (synthetic, in memory: no decode/encode) with the time per stage.
 
+With --flicker CLIP: instead, the temporal change of the completed pixels of CLIP's full-mode run by what filled
+them in the previous and the current frame (CompletionResult.source), against the real pixels' change. Frame t-1's
+completed frame is carried onto frame t by the stabilizer's own transforms (S_{t-1}^-1 M_t^-1 S_t, no estimation
+error); pixels within 2 px of either frame's missing-area outline count as neither, as in pipeline.metrics.
+
 Usage: python benchmarks/completion_psnr.py [--frames 48] [--clips a.mp4,b.avi] [--skip-real] [--skip-speed]
+       python benchmarks/completion_psnr.py --flicker ../shared/videos/selh_asb_1.mp4
 """
 
 from __future__ import annotations
@@ -17,6 +23,13 @@ import pstats
 import sys
 import time
 from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pipeline import completion, smoothing
+from pipeline.observer import NullObserver
+from pipeline.stabilize import stabilize
 
 from pipeline.evaluation import METHODS, CompletionScores, completion_scores, crop_completion_scores, jittered_crop
 from pipeline.smoothing import SmoothingConfig
@@ -42,7 +55,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--clips", default=",".join(REAL))
     parser.add_argument("--skip-real", action="store_true")
     parser.add_argument("--skip-speed", action="store_true")
+    parser.add_argument("--flicker", type=Path, help="only: change of completed pixels by source on this clip")
     args = parser.parse_args(argv)
+    if args.flicker is not None:
+        _flicker_by_source(args.flicker)
+        return 0
 
     print(f"{'scene':34} " + " ".join(f"{m:>12}" for m in METHODS)
           + f" {'vs m+t':>8} {'vs telea':>8} {'kpx/frm':>8} {'s':>6}")
@@ -86,6 +103,72 @@ def _speed(n_frames: int) -> None:
     profile.runcall(stabilize_source, source, None, StabilizeConfig(mode="full"))
     print("\nwhere full mode spends its time (cumulative, top 25):")
     pstats.Stats(profile, stream=sys.stdout).sort_stats("cumulative").print_stats(r"pipeline|cv2|fmm", 25)
+
+
+class _Keep(NullObserver):
+    """Keeps each frame's completed frame, missing mask and source map, the motion and the smoothed path."""
+
+    def __init__(self) -> None:
+        self.completed: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.curr_from_prev: list[np.ndarray] = []
+        self.orig_from_stab: np.ndarray | None = None
+
+    def on_stage(self, stage, stamp, result) -> None:
+        if stage == "motion":
+            self.curr_from_prev.append(result.curr_from_prev)
+        elif stage == "smoothing":
+            self.orig_from_stab = result.orig_from_stab
+        elif stage == "completion":
+            self.completed[stamp.index] = (cv2.cvtColor(result.frame, cv2.COLOR_RGB2GRAY), result.missing,
+                                           result.source)
+
+
+def _flicker_by_source(path: Path) -> None:
+    """Mean |C_t - carried C_{t-1}| (grey levels) over completed pixels by source transition, and over real ones."""
+    kept = _Keep()
+    stabilize(path, None, StabilizeConfig(mode="full"), observer=kept)
+    curr_from_prev, S = np.array(kept.curr_from_prev), kept.orig_from_stab
+    kernel = np.ones((5, 5), np.uint8)
+
+    def band(mask: np.ndarray) -> np.ndarray:  # within 2 px of the outline, either side
+        return cv2.dilate(mask.view(np.uint8), kernel).view(bool) & cv2.dilate((~mask).view(np.uint8), kernel).view(bool)
+
+    sums: dict[tuple[int, int], list[float]] = {}
+    real = [0.0, 0]
+    for t in range(1, len(S)):
+        if t not in kept.completed or t - 1 not in kept.completed:
+            continue
+        grey, missing, source = kept.completed[t]
+        prev_grey, prev_missing, prev_source = kept.completed[t - 1]
+        t_from = smoothing.neighbour_transforms(curr_from_prev, t, t - 1, t)
+        prev_from_here = np.linalg.inv(S[t - 1]) @ np.linalg.inv(t_from[t - 1]) @ S[t]
+        h, w = missing.shape
+
+        def carry(image: np.ndarray, nearest: bool = False, border: int = cv2.BORDER_REPLICATE) -> np.ndarray:
+            flags = (cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR) | cv2.WARP_INVERSE_MAP
+            return cv2.warpPerspective(image, prev_from_here, (w, h), flags=flags, borderMode=border, borderValue=255)
+
+        inside = carry(np.zeros((h, w), np.uint8), True, cv2.BORDER_CONSTANT) == 0
+        change = np.abs(grey.astype(np.float32) - carry(prev_grey).astype(np.float32))
+        was_missing = carry(prev_missing.view(np.uint8), True, cv2.BORDER_CONSTANT) == 1
+        was = carry(prev_source, True, cv2.BORDER_CONSTANT)
+        counted = inside & ~band(missing) & ~band(was_missing)
+        real[0] += float(change[counted & ~missing & ~was_missing].sum())
+        real[1] += int(np.count_nonzero(counted & ~missing & ~was_missing))
+        synthesized = counted & (missing | was_missing)
+        for key in set(zip(was[synthesized].tolist(), source[synthesized].tolist())):
+            mask = synthesized & (was == key[0]) & (source == key[1])
+            entry = sums.setdefault(key, [0.0, 0])
+            entry[0] += float(change[mask].sum())
+            entry[1] += int(np.count_nonzero(mask))
+    total = sum(n for _, n in sums.values())
+    synth = sum(v for v, _ in sums.values()) / max(total, 1)
+    real_mean = real[0] / max(real[1], 1)
+    print(f"{path.name}: completed pixels change {synth:.2f}, real {real_mean:.2f} (x{synth / real_mean:.2f})")
+    print(f"{'t-1 -> t':28} {'share':>6} {'change':>7} {'of total':>9}")
+    for (a, b), (v, n) in sorted(sums.items(), key=lambda kv: -kv[1][0]):
+        names = completion.SOURCE_NAMES
+        print(f"{names[a] + ' -> ' + names[b]:28} {n / total:>6.3f} {v / n:>7.2f} {v / max(total, 1) / synth:>9.2f}")
 
 
 if __name__ == "__main__":
