@@ -1,5 +1,7 @@
-"""The layout a recording opens with: frames side by side, completion, stage stepping of the traced frames,
-deblurring, trajectories original vs smoothed, motion, log."""
+"""The layout a recording opens with: on frame 0, paused; a first tab "overview" (input beside output, the
+camera path original against smoothed, how to read the recording), then one tab per thesis stage in pipeline
+order, each with a short note naming its equations and a colour key beside every colour-mapped image; the
+traced frames' stage stepping; and an "about" tab (the run's summary and its warnings)."""
 
 from __future__ import annotations
 
@@ -9,104 +11,206 @@ import rerun.blueprint as rrb
 
 from ffviz import entities as ent
 
+TAB_ORDER = ("overview", "motion", "smoothing", "mosaic", "local flow + motion inpainting", "deblurring",
+             "stage stepping", "about")
 
-def _trajectory_view(axis: str, unit: str) -> rrb.TimeSeriesView:
-    return rrb.TimeSeriesView(
-        name=f"trajectory {axis} ({unit}): original vs smoothed",
-        origin="/motion/trajectory",
-        contents=[f"/{ent.TRAJECTORY_ORIGINAL}/{axis}", f"/{ent.TRAJECTORY_SMOOTHED}/{axis}"],
+TAB_NOTES = {
+    "overview": (
+        "**How to read this recording.** The time line below is the frame number (`frame`): drag it or use the "
+        "arrow keys, space plays. Left: the input; right: the stabilized, completed, deblurred output. Below: the "
+        "camera path, original (warm colours) against smoothed (cool colours); the vertical line is the current "
+        "frame. Each tab after this one is a stage of the pipeline, in order; each has a colour key beside "
+        "every colour-mapped image. *stage stepping* follows a few frames through every stage (time line "
+        "`stage`); *about* summarises the run and lists its warnings."),
+    "motion": ("**Motion estimation** (thesis ch. 3): corners tracked from frame t-1 to t (green inliers, red "
+               "outliers), a robust fit of `curr_from_prev`; its shift, rotation and zoom per frame, inliers and "
+               "the fit's residual."),
+    "smoothing": ("**Motion smoothing** (eq. 18, `S_t = sum G(i-t) T_t^i`) and **warping** (eq. 19, "
+                  "`I'_t(p) = I_t(S_t p)`): the camera path original against smoothed; red in the stabilized "
+                  "frame is the area no input pixel covers (the crop window in yellow with `--mode crop`)."),
+    "mosaic": ("**Consistent mosaic** (eqs. 20-22): where the aligned neighbours agree (variance of eq. 20 "
+               "below the threshold) the missing pixel takes their mean (eq. 21-22, green); where they disagree "
+               "(red) it is left to motion inpainting."),
+    "local flow + motion inpainting": (
+        "**Local flow** (eq. 23) between a neighbour and the frame over their common area, **motion "
+        "inpainting** of that flow into the missing area by Fast Marching (eq. 24, visiting order and arrival "
+        "time T) and **local-warp mosaicing** (eq. 25): which neighbour filled each pixel."),
+    "deblurring": ("**Deblurring** (thesis ch. 5): relative blurriness b_t (eq. 28, lower is blurrier); a "
+                   "blurrier frame takes pixels from sharper aligned neighbours, weighted by eqs. 30-31. Before / "
+                   "after show only frames that were sharpened."),
+}
+
+
+def _note(tab: str) -> rrb.TextDocumentView:
+    return rrb.TextDocumentView(name="how to read this tab", origin=f"/{ent.note_entity(tab)}")
+
+
+def _key(name: str, title: str) -> rrb.Spatial2DView:
+    return rrb.Spatial2DView(name=f"key: {title}", origin=f"/{ent.key_entity(name)}")
+
+
+def _image(name: str, *entities: str) -> rrb.Spatial2DView:
+    return rrb.Spatial2DView(name=name, origin="/", contents=[f"/{e}" for e in entities])
+
+
+def _trajectory_view(axes: Sequence[str], unit: str) -> rrb.TimeSeriesView:
+    contents = [f"/{root}/{axis}" for axis in axes for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)]
+    return rrb.TimeSeriesView(name=f"camera path {', '.join(axes)} ({unit}): original vs smoothed",
+                              origin="/motion/trajectory", contents=contents)
+
+
+def _traced_views(traced: Sequence[int], title: Callable[[int], str],
+                  contents: Callable[[int], Sequence[str]]) -> list[rrb.View]:
+    return [rrb.Spatial2DView(name=title(t), origin=f"/{ent.TRACE}/{t}", contents=[f"/{e}" for e in contents(t)])
+            for t in traced]
+
+
+def _stage_stepping_tab(traced: Sequence[int]) -> rrb.Container:
+    stages = _traced_views(traced, lambda t: f"frame {t}: input -> output (time line 'stage')",
+                           lambda t: [ent.trace_image(t), ent.trace_label(t)])
+    fmm = _traced_views(traced, lambda t: f"frame {t}: Fast Marching band (time line 'fmm_step')",
+                        lambda t: [ent.trace_fmm(t), ent.trace_fmm_label(t)])
+    if not stages:
+        return rrb.Vertical(rrb.TextDocumentView(name="no traced frames (ffviz stabilize --frames T1,T2)",
+                                                 origin=f"/{ent.META}"), name="stage stepping")
+    return rrb.Vertical(rrb.Horizontal(*stages), rrb.Horizontal(*fmm), name="stage stepping")
+
+
+def overview_tab() -> rrb.Container:
+    return rrb.Vertical(
+        rrb.Horizontal(
+            _image("input", ent.INPUT_FRAME),
+            _image("output (stabilized, completed, deblurred)", ent.OUTPUT_FRAME),
+        ),
+        rrb.Horizontal(
+            _trajectory_view(("x", "y"), "px"),
+            _trajectory_view(("angle",), "deg"),
+            _note("overview"),
+            column_shares=[2, 2, 1.4],
+        ),
+        row_shares=[3, 2],
+        name="overview",
     )
 
 
-def _traced_tab(name: str, traced: Sequence[int], title: Callable[[int], str],
-                contents: Callable[[int], Sequence[str]]) -> rrb.Container:
-    """One view per traced frame (or a placeholder when none is traced)."""
-    views = [rrb.Spatial2DView(name=title(t), origin=f"/{ent.TRACE}/{t}", contents=[f"/{e}" for e in contents(t)])
-             for t in traced]
-    if not views:
-        views = [rrb.TextDocumentView(name="no traced frames", origin=f"/{ent.META}")]
-    return rrb.Grid(*views, name=name)
-
-
-def _stages_tab(traced: Sequence[int]) -> rrb.Container:
-    """The traced frames step through the stages on the `stage` timeline."""
-    return _traced_tab("stages", traced, lambda t: f"frame {t}: input -> ... -> output (select timeline 'stage')",
-                       lambda t: [ent.trace_image(t), ent.trace_label(t)])
-
-
-def _fmm_tab(traced: Sequence[int]) -> rrb.Container:
-    return _traced_tab("motion inpainting", traced,
-                       lambda t: f"frame {t}: motion inpainting, Fast Marching band (select timeline 'fmm_step')",
-                       lambda t: [ent.trace_fmm(t), ent.trace_fmm_label(t)])
-
-
-def _deblur_tab() -> rrb.Container:
+def motion_tab() -> rrb.Container:
     return rrb.Vertical(
         rrb.Horizontal(
-            rrb.Spatial2DView(name="before deblurring", origin="/", contents=[f"/{ent.DEBLUR_BEFORE}"]),
-            rrb.Spatial2DView(name="after deblurring (eq. 30)", origin="/", contents=[f"/{ent.DEBLUR_AFTER}"]),
-            rrb.Spatial2DView(name="share from sharper neighbours (eqs. 30-31)", origin="/", contents=[f"/{ent.DEBLUR_WEIGHTS}"]),
-            rrb.Spatial2DView(name="main source per pixel; red: refused, other content",
-                              origin="/", contents=[f"/{ent.DEBLUR_BEFORE}", f"/{ent.DEBLUR_SOURCE}"]),
+            _image("input + tracked features (green inliers, red outliers)", ent.INPUT_FRAME, f"{ent.MOTION_FEATURES}/**"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(name="inter-frame motion: dx, dy (px), angle (deg), scale",
+                                   origin=f"/{ent.MOTION_PARAMS}"),
+                rrb.Horizontal(
+                    rrb.TimeSeriesView(name="inliers", origin=f"/{ent.MOTION_INLIERS}"),
+                    rrb.TimeSeriesView(name="inlier ratio", origin=f"/{ent.MOTION_INLIER_RATIO}"),
+                    rrb.TimeSeriesView(name="residual (px)", origin=f"/{ent.MOTION_RESIDUAL}"),
+                ),
+            ),
+        ),
+        _note("motion"),
+        row_shares=[5, 1],
+        name="motion",
+    )
+
+
+def smoothing_tab() -> rrb.Container:
+    return rrb.Vertical(
+        rrb.Horizontal(
+            rrb.Vertical(_trajectory_view(("x",), "px"), _trajectory_view(("y",), "px"),
+                         _trajectory_view(("angle",), "deg")),
+            rrb.Vertical(
+                _image("stabilized (eq. 19): missing area in red, crop window in yellow", ent.STABILIZED_FRAME,
+                       ent.STABILIZED_MISSING, ent.CROP_WINDOW),
+                _key("missing", "missing area"),
+                row_shares=[4, 1],
+            ),
+        ),
+        _note("smoothing"),
+        row_shares=[5, 1],
+        name="smoothing",
+    )
+
+
+def mosaic_tab() -> rrb.Container:
+    return rrb.Vertical(
+        rrb.Horizontal(
+            rrb.Vertical(_image("mosaic variance (eq. 20)", ent.COMPLETION_VARIANCE), _key("variance", "variance"),
+                         row_shares=[4, 1]),
+            rrb.Vertical(_image("accepted (green) / rejected (red) by the mosaic", ent.STABILIZED_FRAME,
+                                ent.COMPLETION_ACCEPTED),
+                         _key("accepted", "mosaic"), row_shares=[4, 1]),
+        ),
+        rrb.Horizontal(
+            rrb.TimeSeriesView(name="share of the frame: missing / mosaic / local warp / fallback",
+                               origin=f"/{ent.COMPLETION_STATS}"),
+            _note("mosaic"),
+            column_shares=[2, 1],
+        ),
+        row_shares=[3, 1],
+        name="mosaic",
+    )
+
+
+def inpainting_tab() -> rrb.Container:
+    return rrb.Vertical(
+        rrb.Horizontal(
+            rrb.Vertical(_image("local flow (eq. 23), motion-inpainted (eq. 24); first neighbour",
+                                ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS), row_shares=[1]),
+            rrb.Vertical(_image("Fast Marching visiting order", ent.COMPLETION_FMM_ORDER),
+                         _key("fmm_order", "visiting order"), row_shares=[4, 1]),
+            rrb.Vertical(_image("Fast Marching arrival time T", ent.COMPLETION_FMM_ARRIVAL),
+                         _key("fmm_arrival", "arrival time"), row_shares=[4, 1]),
+        ),
+        rrb.Horizontal(
+            _image("filled by (eq. 25): neighbour offset / mosaic / fallback", ent.COMPLETION_FRAME,
+                   ent.COMPLETION_FILLED_BY, ent.COMPLETION_FALLBACK),
+            _image("completed", ent.COMPLETION_FRAME),
+            rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by")),
+            _note("local flow + motion inpainting"),
+        ),
+        name="local flow + motion inpainting",
+    )
+
+
+def deblur_tab() -> rrb.Container:
+    return rrb.Vertical(
+        rrb.Horizontal(
+            _image("before deblurring (sharpened frames only)", ent.DEBLUR_BEFORE),
+            _image("after deblurring (eq. 30)", ent.DEBLUR_AFTER),
+            rrb.Vertical(_image("share from sharper neighbours (eqs. 30-31)", ent.DEBLUR_WEIGHTS),
+                         _key("deblur_weights", "weights"), row_shares=[4, 1]),
+            rrb.Vertical(_image("main source per pixel; red: refused, other content", ent.DEBLUR_BEFORE,
+                                ent.DEBLUR_SOURCE),
+                         _key("deblur_source", "source"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
             rrb.TimeSeriesView(name="relative blurriness b_t (eq. 28)", origin=f"/{ent.DEBLUR_BLURRINESS}"),
             rrb.TimeSeriesView(name="sharper neighbours used", origin=f"/{ent.DEBLUR_NEIGHBOURS}"),
             rrb.TimeSeriesView(name="refused share of the frame", origin=f"/{ent.DEBLUR_REFUSED}"),
+            _note("deblurring"),
         ),
-        name="deblur",
+        name="deblurring",
+    )
+
+
+def about_tab() -> rrb.Container:
+    return rrb.Vertical(
+        rrb.TextDocumentView(name="about this run", origin=f"/{ent.META}"),
+        rrb.TextLogView(name="warnings", origin=f"/{ent.LOG}"),
+        row_shares=[3, 1],
+        name="about",
     )
 
 
 def default_blueprint(traced: Sequence[int] = ()) -> rrb.Blueprint:
     """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each)."""
-    frames = rrb.Horizontal(
-        rrb.Spatial2DView(name="input + tracked features", origin="/",
-                          contents=[f"/{ent.INPUT_FRAME}", f"/{ent.MOTION_FEATURES}/**"]),
-        rrb.Spatial2DView(name="stabilized (missing in red)", origin="/stabilized"),
-        rrb.Spatial2DView(name="output", origin="/output"),
-    )
-    trajectories = rrb.Vertical(
-        _trajectory_view("x", "px"), _trajectory_view("y", "px"), _trajectory_view("angle", "deg"),
-    )
-    motion = rrb.Vertical(
-        rrb.TimeSeriesView(name="inter-frame motion (dx, dy px; angle deg; scale)", origin=f"/{ent.MOTION_PARAMS}"),
-        rrb.Horizontal(
-            rrb.TimeSeriesView(name="inliers", origin=f"/{ent.MOTION_INLIERS}"),
-            rrb.TimeSeriesView(name="inlier ratio", origin=f"/{ent.MOTION_INLIER_RATIO}"),
-            rrb.TimeSeriesView(name="residual (px)", origin=f"/{ent.MOTION_RESIDUAL}"),
-        ),
-    )
-    completion = rrb.Grid(
-        rrb.Spatial2DView(name="stabilized (missing in red)", origin="/stabilized"),
-        rrb.Spatial2DView(name="mosaic variance (eq. 20)", origin="/", contents=[f"/{ent.COMPLETION_VARIANCE}"]),
-        rrb.Spatial2DView(name="mosaic accepted (green) / rejected (red)", origin="/",
-                          contents=[f"/{ent.STABILIZED_FRAME}", f"/{ent.COMPLETION_ACCEPTED}"]),
-        rrb.Spatial2DView(name="local flow, motion-inpainted", origin="/completion/flow"),
-        rrb.Spatial2DView(name="FMM visiting order", origin="/", contents=[f"/{ent.COMPLETION_FMM_ORDER}"]),
-        rrb.Spatial2DView(name="FMM arrival time T", origin="/", contents=[f"/{ent.COMPLETION_FMM_ARRIVAL}"]),
-        rrb.Spatial2DView(name="filled by (neighbour offset / mosaic / fallback)", origin="/",
-                          contents=[f"/{ent.COMPLETION_FRAME}", f"/{ent.COMPLETION_FILLED_BY}", f"/{ent.COMPLETION_FALLBACK}"]),
-        rrb.Spatial2DView(name="completed", origin="/", contents=[f"/{ent.COMPLETION_FRAME}"]),
-        rrb.TimeSeriesView(name="fraction of frame: missing / mosaic / local warp / fallback",
-                           origin=f"/{ent.COMPLETION_STATS}"),
-        name="completion",
-    )
     return rrb.Blueprint(
-        rrb.Vertical(
-            rrb.Tabs(
-                rrb.Vertical(frames, name="frames"),
-                completion,
-                _stages_tab(traced),
-                _fmm_tab(traced),
-                _deblur_tab(),
-                rrb.Vertical(trajectories, name="trajectories"),
-                rrb.Vertical(motion, name="motion"),
-                rrb.TextDocumentView(name="about", origin=f"/{ent.META}"),
-            ),
-            rrb.TextLogView(name="warnings", origin=f"/{ent.LOG}"),
-            row_shares=[5, 1],
+        rrb.Tabs(
+            overview_tab(), motion_tab(), smoothing_tab(), mosaic_tab(), inpainting_tab(), deblur_tab(),
+            _stage_stepping_tab(traced), about_tab(),
+            active_tab=0,
         ),
-        rrb.TimePanel(state="expanded", timeline=ent.FRAME_TIMELINE),
+        # Opens on frame 0, paused (without play_state the viewer starts on the last frame, playing).
+        rrb.TimePanel(state="expanded", timeline=ent.FRAME_TIMELINE, play_state="paused"),
         collapse_panels=True,
     )

@@ -23,6 +23,34 @@ STABILIZED_FRAME = "stabilized/frame"
 STABILIZED_MISSING = "stabilized/missing"
 
 OUTPUT_FRAME = "output/frame"
+CROP_WINDOW = "stabilized/crop"  # --mode crop: the window kept of every stabilized frame (Boxes2D, static)
+
+# Frame streams: H.264 VideoStream by default (lossy, ~0.01 MB a frame); raw images with --lossless.
+# deblur/before and deblur/after are sparse video streams too (sharpened frames only, cleared in between).
+FRAME_STREAMS = (INPUT_FRAME, "stabilized/frame", "completion/frame", OUTPUT_FRAME, "deblur/before", "deblur/after")
+
+# Float maps are stored as 16-bit PNG (EncodedDepthImage): stored = round(value / step) + 1, 0 = no value,
+# clipped at 65535. With --lossless they are float32 DepthImages, exact.
+MAP_STEPS = {"completion/mosaic/variance": 0.25,  # intensity^2 (0..255 scale); up to 16383.5
+             "completion/fmm/order": 1.0,  # visiting order; exact up to 65534 pixels filled from one neighbour
+             "completion/fmm/arrival": 0.01}  # Fast Marching arrival time T, px; up to 655 px
+MAP_UNITS = {"completion/mosaic/variance": "intensity^2", "completion/fmm/order": "pixels filled before",
+             "completion/fmm/arrival": "px"}
+
+# Colour keys: small static images beside the views that show a colour-mapped image.
+KEYS = "keys"
+
+
+def key_entity(name: str) -> str:
+    return f"{KEYS}/{name}"
+
+
+NOTES = "notes"  # static markdown, one per tab
+
+
+def note_entity(tab: str) -> str:
+    """The tab's note; the tab's name made a path part (``local flow + motion inpainting`` -> ``local_flow_motion_inpainting``)."""
+    return f"{NOTES}/" + "_".join(w for w in tab.replace("+", " ").split())
 
 COMPLETION_VARIANCE = "completion/mosaic/variance"
 COMPLETION_ACCEPTED = "completion/mosaic/accepted"
@@ -68,3 +96,18 @@ def trace_fmm(frame: int) -> str:
 
 def trace_fmm_label(frame: int) -> str:
     return f"{TRACE}/{frame}/fmm_label"
+
+
+# Every colour-mapped image and the key picture that explains its colours (tests check each is recorded).
+KEY_OF = {
+    STABILIZED_MISSING: "missing",
+    COMPLETION_VARIANCE: "variance",
+    COMPLETION_ACCEPTED: "accepted",
+    COMPLETION_FLOW_IMAGE: "flow",
+    COMPLETION_FMM_ORDER: "fmm_order",
+    COMPLETION_FMM_ARRIVAL: "fmm_arrival",
+    COMPLETION_FILLED_BY: "filled_by",
+    COMPLETION_FALLBACK: "filled_by",
+    DEBLUR_WEIGHTS: "deblur_weights",
+    DEBLUR_SOURCE: "deblur_source",
+}

@@ -242,7 +242,7 @@ def mosaic_variance(recording: Recording, requested: Sequence[int] | None = None
     fig = Figure(figsize=(2 * PANEL_WIDTH_IN + 1.2, PANEL_WIDTH_IN * height / width * len(frames) + 0.9), dpi=DPI,
                  layout="constrained")
     axes = fig.subplots(len(frames), 2, squeeze=False)
-    variances = [recording.image(ent.COMPLETION_VARIANCE, t) for t in frames]
+    variances = [recording.map(ent.COMPLETION_VARIANCE, t) for t in frames]
     finite = np.concatenate([v[np.isfinite(v)] for v in variances])
     vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
     for r, (t, variance) in enumerate(zip(frames, variances)):

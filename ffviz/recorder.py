@@ -16,9 +16,15 @@ import uuid
 from pathlib import Path
 from typing import Any, Literal, Sequence
 
+import io
+import time
+from fractions import Fraction
+
+import av
 import cv2
 import numpy as np
 import rerun as rr
+from PIL import Image as PILImage
 
 import ffviz
 from ffviz import entities as ent, trace, visual
@@ -36,13 +42,127 @@ RECORD_LEVELS: tuple[str, ...] = ("summary", "full")
 MISSING_CLASS = 1
 MAX_FEATURE_ARROWS = 300  # enough to read the motion, few enough to keep files small
 FILLED_BY_BASE = 100  # filled_by class of a local-warp pixel: FILLED_BY_BASE + neighbour offset
+# H.264 frame streams (rr.VideoStream): no B-frames (rerun takes each sample's time as its PTS), zerolatency so
+# that each frame's packet comes out with it (live view, no reordering), a keyframe a second for seeking.
+H264_OPTIONS = {"preset": "veryfast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
+KEYFRAME_INTERVAL = 30
+BATCHER = rr.ChunkBatcherConfig(flush_tick=2.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
+MISSING_LEGEND = [(0, "valid", (0, 0, 0, 0)), (MISSING_CLASS, "missing", (255, 0, 64, 160))]
+ACCEPTED_LEGEND = [(0, "known", (0, 0, 0, 0)), (1, "missing, rejected by the mosaic", (255, 0, 64, 160)),
+                   (2, "missing, accepted by the mosaic", (40, 200, 90, 160))]
+FALLBACK_LEGEND = [(0, "other", (0, 0, 0, 0)), (1, "fallback", (255, 200, 0, 200))]
+CROP_COLOUR = (255, 220, 0)
+LABEL_COLOUR = (25, 25, 35, 255)  # stage labels: the viewer writes light text on a dark label of this colour
+VARIANCE_RANGE = (0.0, 400.0)  # colour range of the variance map: 4x the default threshold (100) saturates
+ARRIVAL_RANGE = (0.0, 60.0)  # px
+
+
+def _offset_colour(offset: int, alpha: int = 190) -> tuple[int, int, int, int]:
+    """Neighbour ``offset``'s colour: blues for earlier frames, oranges for later, darker further away."""
+    base = np.array((40, 120, 255) if offset < 0 else (255, 110, 30), float)
+    fade = min(abs(offset) - 1, 15) / 15
+    light = base + (255 - base) * 0.45 * (1 - fade)
+    return tuple(int(c) for c in light * (1 - 0.45 * fade)) + (alpha,)
+
+
+def _png(rgb: np.ndarray) -> bytes:
+    ok, data = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return data.tobytes()
+
+
+class VideoTrack:
+    """One frame stream as H.264 samples on a ``rr.VideoStream`` entity, encoded as frames arrive (PyAV)."""
+
+    def __init__(self, rec: rr.RecordingStream, entity: str, fps: float) -> None:
+        self.rec, self.entity, self.fps = rec, entity, fps
+        self._codec: av.CodecContext | None = None
+        self._times: dict[int, float] = {}
+        self.frames = 0
+        self.bytes = 0
+
+    def _open(self, width: int, height: int) -> None:
+        codec = av.CodecContext.create("libx264", "w")
+        codec.width, codec.height, codec.pix_fmt = width + width % 2, height + height % 2, "yuv420p"
+        rate = Fraction(self.fps).limit_denominator(1001) if self.fps and self.fps > 0 else Fraction(30)
+        codec.framerate, codec.time_base = rate, 1 / rate
+        codec.options = dict(H264_OPTIONS, g=str(KEYFRAME_INTERVAL))
+        self._codec = codec
+        self.rec.log(self.entity, rr.VideoStream(codec=rr.VideoCodec.H264), static=True)
+
+    def add(self, stamp: Stamp, rgb: np.ndarray) -> None:
+        height, width = rgb.shape[:2]
+        if self._codec is None:
+            self._open(width, height)
+        if width % 2 or height % 2:  # 4:2:0 needs even sizes: repeat the last row / column
+            rgb = np.pad(rgb, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24").reformat(format="yuv420p")
+        frame.pts = stamp.index
+        self._times[stamp.index] = stamp.time_s
+        self._send(self._codec.encode(frame), current=stamp.index)
+
+    def _send(self, packets: Sequence[av.Packet], current: int | None = None) -> None:
+        for packet in packets:
+            index = int(packet.pts)
+            data = bytes(packet)
+            self.bytes += len(data)
+            self.frames += 1
+            sample = np.frombuffer(data, np.uint8)
+            if index == current:  # the frame being recorded (always, with zerolatency): batched with its rows
+                self._times.pop(index, None)
+                self.rec.log(self.entity, rr.VideoStream.from_fields(sample=sample, is_keyframe=bool(packet.is_keyframe)))
+                continue
+            # A late packet: columns, so that the recording's current time (the frame being recorded) stays.
+            self.rec.send_columns(self.entity, indexes=[
+                rr.TimeColumn(ent.FRAME_TIMELINE, sequence=[index]),
+                rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=[self._times.pop(index, 0.0)])],
+                columns=rr.VideoStream.columns(sample=[np.frombuffer(data, np.uint8)],
+                                               is_keyframe=[bool(packet.is_keyframe)]))
+
+    def close(self) -> None:
+        if self._codec is not None:
+            self._send(self._codec.encode(None))
+            self._codec = None
+
+
+def palette_png(classes: np.ndarray, legend: Sequence[tuple]) -> bytes:
+    """A class map as a paletted PNG: each class its legend colour (with alpha). Lossless: PIL reads the
+    class indices back; the viewer shows the colours."""
+    palette = np.zeros((256, 4), np.uint8)
+    for code, _, colour in legend:
+        palette[code, :len(colour)] = colour
+        if len(colour) == 3:
+            palette[code, 3] = 255
+    image = PILImage.fromarray(np.ascontiguousarray(classes, dtype=np.uint8), mode="P")
+    image.putpalette(palette[:, :3].ravel().tolist())
+    buffer = io.BytesIO()
+    image.save(buffer, format="PNG", transparency=palette[:, 3].tobytes(), compress_level=6)
+    return buffer.getvalue()
+
+
+def quantised_map(values: np.ndarray, step: float) -> np.ndarray:
+    """uint16: round(value / step) + 1 where finite, 0 where not (see entities.MAP_STEPS)."""
+    finite = np.isfinite(values)
+    stored = np.zeros(values.shape, np.uint16)
+    stored[finite] = np.clip(np.rint(values[finite] / step) + 1, 1, 65535).astype(np.uint16)
+    return stored
+
+
+def png16(stored: np.ndarray) -> bytes:
+    ok, data = cv2.imencode(".png", stored, [cv2.IMWRITE_PNG_COMPRESSION, 6])
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return data.tobytes()
 
 
 class RerunRecorder:
     """Observer that records a run to ``path`` (.rrd).
 
     ``level``: "summary" records series and output frames; "full" adds every frame-sized intermediate.
-    ``jpeg_quality``: None records images losslessly.
+    ``jpeg_quality``: None records images losslessly (raw frames, float maps); otherwise the frame streams
+    (input, stabilized, completed, output) are H.264 video streams, float maps 16-bit PNGs, and the sparse
+    images (deblurring, flow, traced frames) JPEGs at this quality. Masks are lossless either way.
     ``trace_frames``: frames to follow through every stage; None: ``trace.DEFAULT_TRACED`` frames with missing
     area at level "full", none at "summary".
     """
@@ -58,7 +178,9 @@ class RerunRecorder:
         fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".rrd.tmp", dir=self.path.parent)
         os.close(fd)
         self._tmp_path = Path(tmp)
-        self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()))
+        # Rows batched into chunks of up to ~2 s / 4 MB: a chunk per log call (the default for a slow producer)
+        # costs its schema (a few kB) each time, more than a compressed mask or video sample.
+        self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()), batcher_config=BATCHER)
         self.rec.save(self._tmp_path)  # the default blueprint follows once the traced frames are known
         self._times: dict[int, float] = {}
         self._size = (0, 0)
@@ -66,44 +188,121 @@ class RerunRecorder:
         self._trace_requested = None if trace_frames is None else tuple(sorted({int(t) for t in trace_frames}))
         self.traced: tuple[int, ...] = self._trace_requested or ()  # default ones chosen when the path is known
         self._blueprint_sent = False
+        self._tracks: dict[str, VideoTrack] = {}
+        self._fps = 30.0
+        self._info: Any = None
+        self._config: Any = None
+        self._crop: Any = None
+        self._warnings = 0
+        self._started = time.perf_counter()
+        self._cpu_started = time.process_time()
+        self.seconds_logging = 0.0  # wall time spent inside the recorder (encoding and logging)
+
+    @property
+    def lossless(self) -> bool:
+        return self.jpeg_quality is None
 
     # -- Observer ---------------------------------------------------------------------------------
 
     def on_start(self, info: Any, config: Any) -> None:
+        started = time.perf_counter()
         self._size = (info.width, info.height)
-        self.rec.log(ent.META, rr.TextDocument(self._meta_markdown(info, config), media_type=rr.MediaType.MARKDOWN),
-                     static=True)
-        self.rec.log(ent.STABILIZED_MISSING, rr.AnnotationContext([(0, "valid", (0, 0, 0, 0)),
-                                                                    (MISSING_CLASS, "missing", (255, 0, 64, 160))]),
-                     static=True)
-        self.rec.log(ent.COMPLETION_ACCEPTED, rr.AnnotationContext([
-            (0, "known", (0, 0, 0, 0)), (1, "missing, rejected", (255, 0, 64, 160)),
-            (2, "accepted by mosaic", (40, 200, 90, 160))]), static=True)
-        self.rec.log(ent.COMPLETION_FALLBACK, rr.AnnotationContext([(0, "other", (0, 0, 0, 0)),
-                                                                     (1, "fallback", (255, 200, 0, 200))]), static=True)
-        self.rec.log(ent.COMPLETION_FILLED_BY, rr.AnnotationContext(self._filled_by_legend()), static=True)
-        self.rec.log(ent.DEBLUR_SOURCE, rr.AnnotationContext(self._deblur_source_legend()), static=True)
+        self._info, self._config = info, config
+        try:
+            self._fps = float(info.fps) or 30.0
+        except (TypeError, ValueError, AttributeError):
+            self._fps = 30.0
+        self._log_meta()
+        # Class maps: the legend as an annotation context (hover names in --lossless SegmentationImages; the
+        # colours of the paletted PNGs otherwise) and as a key picture beside the views.
+        for entity, legend, title in ((ent.STABILIZED_MISSING, MISSING_LEGEND, "missing area"),
+                                      (ent.COMPLETION_ACCEPTED, ACCEPTED_LEGEND, "mosaic (eqs. 20-21)"),
+                                      (ent.COMPLETION_FALLBACK, FALLBACK_LEGEND, "fallback"),
+                                      (ent.COMPLETION_FILLED_BY, self._filled_by_legend(), "filled by"),
+                                      (ent.DEBLUR_SOURCE, self._deblur_source_legend(), "deblurred pixel from")):
+            self.rec.log(entity, rr.AnnotationContext(legend), static=True)
+        self._log_keys()
+        self._log_series_styles()
+        self.seconds_logging += time.perf_counter() - started
+
+    def _log_series_styles(self) -> None:
+        """Every chart line: a name and a colour of its own (distinct hues, readable on the dark theme)."""
+        styles = {f"{ent.MOTION_PARAMS}/dx": ("dx (px)", (230, 90, 60)), f"{ent.MOTION_PARAMS}/dy": ("dy (px)", (40, 150, 240)),
+                  f"{ent.MOTION_PARAMS}/angle": ("angle (deg)", (240, 200, 40)),
+                  f"{ent.MOTION_PARAMS}/scale": ("scale", (180, 100, 240)),
+                  ent.MOTION_INLIERS: ("inliers", (60, 200, 120)), ent.MOTION_INLIER_RATIO: ("inlier ratio", (60, 200, 220)),
+                  ent.MOTION_RESIDUAL: ("residual (px)", (240, 120, 180)),
+                  f"{ent.COMPLETION_STATS}/missing": ("missing", (240, 60, 80)),
+                  f"{ent.COMPLETION_STATS}/mosaic": ("mosaic", (60, 200, 90)),
+                  f"{ent.COMPLETION_STATS}/local_warp": ("local warp (motion inpainting)", (80, 150, 255)),
+                  f"{ent.COMPLETION_STATS}/fallback": ("fallback", (255, 200, 0))}
+        for entity, (name, colour) in styles.items():
+            self.rec.log(entity, rr.SeriesLines(names=name, colors=[colour], widths=2.0), static=True)
+
+    def _log_keys(self) -> None:
+        """Colour keys (static pictures) for every colour-mapped entity, and the tabs' notes."""
+        from ffviz import blueprint
+
+        for name, image in self.colour_keys().items():
+            self.rec.log(ent.key_entity(name), rr.EncodedImage(contents=_png(image), media_type="image/png"),
+                         static=True)
+        for tab, text in blueprint.TAB_NOTES.items():
+            self.rec.log(ent.note_entity(tab), rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
+
+    def colour_keys(self) -> dict[str, np.ndarray]:
+        """Key pictures by name (entities.key_entity(name)); KEY_OF maps each colour-mapped entity to one."""
+        return {
+            "flow": visual.flow_wheel(),
+            "variance": visual.colour_bar("turbo", 0, VARIANCE_RANGE[1], "intensity^2 (0-255 scale); threshold: "
+                                          "green in the mosaic map", "mosaic variance (eq. 20)"),
+            "fmm_order": visual.colour_bar("viridis", 0, 1, "share of the neighbour's filled pixels visited before",
+                                           "Fast Marching visiting order", fmt="{:.2f}"),
+            "fmm_arrival": visual.colour_bar("magma", 0, ARRIVAL_RANGE[1], "px from the nearest known pixel",
+                                             "Fast Marching arrival time T"),
+            "deblur_weights": visual.colour_bar("viridis", 0, 1, "share of the pixel from sharper neighbours",
+                                                "deblurring weights (eqs. 30-31)", fmt="{:.2f}"),
+            "missing": visual.palette_key([(n, c) for _, n, c in MISSING_LEGEND[1:]], "stabilized frame"),
+            "accepted": visual.palette_key([(n, c) for _, n, c in ACCEPTED_LEGEND[1:]], "mosaic (eqs. 20-21)"),
+            "filled_by": visual.palette_key(
+                [("mosaic", (40, 200, 90, 170)), ("fallback", (255, 200, 0, 200))]
+                + [(f"neighbour {o:+d}", c) for o, c in ((-10, _offset_colour(-10)), (-1, _offset_colour(-1)),
+                                                          (1, _offset_colour(1)), (10, _offset_colour(10)))],
+                "filled by (neighbours: blue = earlier, red = later)"),
+            "deblur_source": visual.palette_key(
+                [("refused: other content", (230, 40, 60, 200))]
+                + [(f"from neighbour {o:+d}", c) for o, c in ((-5, _offset_colour(-5)), (5, _offset_colour(5)))],
+                "deblurred pixel from"),
+        }
         self.rec.log(ent.DEBLUR_REFUSED, rr.SeriesLines(names="refused (share of the frame)", colors=[(230, 40, 60)]),
                      static=True)
         self.rec.log(ent.DEBLUR_BLURRINESS, rr.SeriesLines(names="blurriness b_t", colors=[(200, 80, 200)]), static=True)
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.SeriesLines(names="sharper neighbours used", colors=[(90, 160, 90)]),
                      static=True)
-        for name, colour in (("original", (230, 90, 60)), ("smoothed", (40, 120, 230))):
+        # Original in warm colours, smoothed in cool ones; x and y told apart within each.
+        colours = {("original", "x"): (235, 80, 60), ("original", "y"): (245, 175, 40),
+                   ("original", "angle"): (235, 80, 60), ("smoothed", "x"): (50, 130, 245),
+                   ("smoothed", "y"): (60, 210, 200), ("smoothed", "angle"): (50, 130, 245)}
+        for name in ("original", "smoothed"):
             root = ent.TRAJECTORY_ORIGINAL if name == "original" else ent.TRAJECTORY_SMOOTHED
             for axis in ent.TRAJECTORY_AXES:
-                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", colors=[colour]), static=True)
+                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", colors=[colours[name, axis]],
+                                                              widths=2.0), static=True)
 
     def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
         handler = getattr(self, f"_on_{stage}", None)
         if handler is not None:
+            started = time.perf_counter()
             handler(stamp, result)
+            self.seconds_logging += time.perf_counter() - started
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:
+        self._warnings += 1
         if stamp is not None:
             self._set_time(stamp)
         self.rec.log(ent.LOG, rr.TextLog(message, level=rr.TextLogLevel.WARN), static=stamp is None)
 
     def on_finish(self, report: Any) -> None:
+        self._log_meta(report)
         self.close()
 
     # -- stages -----------------------------------------------------------------------------------
@@ -149,18 +348,29 @@ class RerunRecorder:
                                                  "frames: not traced", level=rr.TextLogLevel.WARN), static=True)
             self._set_traced([t for t in self._trace_requested if t < n])
 
+    def _on_crop(self, stamp: None, crop: Any) -> None:
+        """--mode crop: the window of the stabilized frame that becomes the output (static, drawn over it)."""
+        self._crop = crop
+        width, height = self._size
+        self.rec.log(ent.CROP_WINDOW, rr.Boxes2D(
+            array=[crop.x0, crop.y0, crop.scale * width, crop.scale * height], array_format=rr.Box2DFormat.XYWH,
+            colors=[CROP_COLOUR], radii=1.5,
+            labels=[f"crop window: {crop.cropping_ratio:.0%} of the area, scaled x{1 / crop.scale:.3f} to the output"],
+            show_labels=True), static=True)
+        self._log_meta()
+
     def _on_input(self, stamp: Stamp, frame: Frame) -> None:
         self._trace(stamp, "input", frame.rgb)
         if self.level == "full":
             self._set_time(stamp)
-            self.rec.log(ent.INPUT_FRAME, self._image(frame.rgb))
+            self._frame(ent.INPUT_FRAME, stamp, frame.rgb)
 
     def _on_warp(self, stamp: Stamp, result: WarpResult) -> None:
         self._trace(stamp, "stabilized", result.frame)
         if self.level == "full":
             self._set_time(stamp)
-            self.rec.log(ent.STABILIZED_FRAME, self._image(result.frame))
-            self.rec.log(ent.STABILIZED_MISSING, rr.SegmentationImage(result.missing.astype(np.uint8) * MISSING_CLASS))
+            self._frame(ent.STABILIZED_FRAME, stamp, result.frame)
+            self._classes(ent.STABILIZED_MISSING, result.missing.astype(np.uint8) * MISSING_CLASS, MISSING_LEGEND)
 
     def _on_completion(self, stamp: Stamp, result: CompletionResult) -> None:
         if stamp.index in self.traced:
@@ -173,13 +383,13 @@ class RerunRecorder:
             self.rec.log(f"{ent.COMPLETION_STATS}/{name.replace(' ', '_')}", rr.Scalars(counts[code] / frame_area))
         if self.level != "full":
             return
-        self.rec.log(ent.COMPLETION_FRAME, self._image(result.frame))
-        self.rec.log(ent.COMPLETION_VARIANCE, rr.DepthImage(visual.finite_or_nan(result.mosaic.variance),
-                                                            colormap="turbo"))
-        self.rec.log(ent.COMPLETION_ACCEPTED, rr.SegmentationImage(
-            np.where(result.mosaic.accepted, 2, np.where(result.missing, 1, 0)).astype(np.uint8)))
-        self.rec.log(ent.COMPLETION_FILLED_BY, rr.SegmentationImage(self._filled_by_classes(result)))
-        self.rec.log(ent.COMPLETION_FALLBACK, rr.SegmentationImage(result.fallback.astype(np.uint8)))
+        self._frame(ent.COMPLETION_FRAME, stamp, result.frame)
+        self._map(ent.COMPLETION_VARIANCE, result.mosaic.variance, "turbo", VARIANCE_RANGE)
+        self._classes(ent.COMPLETION_ACCEPTED,
+                      np.where(result.mosaic.accepted, 2, np.where(result.missing, 1, 0)).astype(np.uint8),
+                      ACCEPTED_LEGEND)
+        self._classes(ent.COMPLETION_FILLED_BY, self._filled_by_classes(result), self._filled_by_legend())
+        self._classes(ent.COMPLETION_FALLBACK, result.fallback.astype(np.uint8), FALLBACK_LEGEND)
         if result.fills:
             first = result.fills[0]
             self.rec.log(ent.COMPLETION_FLOW_IMAGE, self._image(visual.flow_to_rgb(first.inpainted.flow)))
@@ -187,9 +397,12 @@ class RerunRecorder:
             self.rec.log(ent.COMPLETION_FLOW_ARROWS, rr.Arrows2D(origins=origins, vectors=vectors))
             order = first.inpainted.order.astype(np.float32)
             order[order < 0] = np.nan
-            self.rec.log(ent.COMPLETION_FMM_ORDER, rr.DepthImage(order, colormap="viridis"))
-            self.rec.log(ent.COMPLETION_FMM_ARRIVAL, rr.DepthImage(visual.finite_or_nan(first.inpainted.arrival),
-                                                                   colormap="magma"))
+            self._map(ent.COMPLETION_FMM_ORDER, order, "viridis", (0.0, float(np.nanmax(order)) if (order >= 0).any() else 1.0))
+            self._map(ent.COMPLETION_FMM_ARRIVAL, first.inpainted.arrival, "magma", ARRIVAL_RANGE)
+        else:  # no stale map from an earlier frame
+            for entity in (ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS, ent.COMPLETION_FMM_ORDER,
+                           ent.COMPLETION_FMM_ARRIVAL):
+                self.rec.log(entity, rr.Clear(recursive=False))
 
     def _filled_by_classes(self, result: CompletionResult) -> np.ndarray:
         """Class per pixel: 0 original, 1 mosaic, 2 fallback, FILLED_BY_BASE + offset for local warps."""
@@ -213,24 +426,30 @@ class RerunRecorder:
             return
         # Where each pixel came from, and where a sharper neighbour was refused (shown even when none was used).
         classes = self._deblur_source_classes(result)
-        self.rec.log(ent.DEBLUR_SOURCE, rr.SegmentationImage(classes) if classes.any() else rr.Clear(recursive=False))
+        if classes.any():
+            self._classes(ent.DEBLUR_SOURCE, classes, self._deblur_source_legend())
+        else:
+            self.rec.log(ent.DEBLUR_SOURCE, rr.Clear(recursive=False))
         if not neighbours:  # nothing was sharpened: clear, so the viewer shows no stale frame from earlier
             for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS):
                 self.rec.log(entity, rr.Clear(recursive=False))
             return
-        self.rec.log(ent.DEBLUR_BEFORE, self._image(result.before))
-        self.rec.log(ent.DEBLUR_AFTER, self._image(result.frame))
+        # Sparse video streams (only sharpened frames; cleared in between, which hides them there).
+        self._frame(ent.DEBLUR_BEFORE, stamp, result.before)
+        self._frame(ent.DEBLUR_AFTER, stamp, result.frame)
         weights = getattr(result, "weights", None)
         if weights is not None:
             # uint8 (255 = 1): a float32 map is 4x the bytes and does not compress; 1/255 is plenty to look at.
             quantised = np.clip(np.asarray(weights, np.float32) * ent.DEBLUR_WEIGHTS_SCALE + 0.5, 0, 255).astype(np.uint8)
-            self.rec.log(ent.DEBLUR_WEIGHTS, rr.DepthImage(quantised, meter=ent.DEBLUR_WEIGHTS_SCALE, colormap="viridis",
-                                                           depth_range=(0.0, ent.DEBLUR_WEIGHTS_SCALE)))
+            # 8-bit PNG: lossless for the uint8 values, a few kB instead of 230 kB at 640x360.
+            self.rec.log(ent.DEBLUR_WEIGHTS, rr.EncodedDepthImage(
+                png16(quantised), media_type="image/png", meter=ent.DEBLUR_WEIGHTS_SCALE, colormap="viridis",
+                depth_range=(0.0, ent.DEBLUR_WEIGHTS_SCALE)))
 
     def _on_output(self, stamp: Stamp, rgb: np.ndarray) -> None:
         self._trace(stamp, "output", rgb)
         self._set_time(stamp)
-        self.rec.log(ent.OUTPUT_FRAME, self._image(rgb))
+        self._frame(ent.OUTPUT_FRAME, stamp, rgb)
 
     # -- stage stepping ---------------------------------------------------------------------------
 
@@ -254,7 +473,7 @@ class RerunRecorder:
         height, width = rgb.shape[:2]
         self.rec.log(ent.trace_image(stamp.index), self._image(rgb))
         self.rec.log(ent.trace_label(stamp.index), rr.Boxes2D(
-            array=[0, 0, width, height], array_format=rr.Box2DFormat.XYWH, colors=[(255, 255, 255, 60)],
+            array=[0, 0, width, height], array_format=rr.Box2DFormat.XYWH, colors=[LABEL_COLOUR],
             labels=[trace.stage_label(stamp.index, step)], show_labels=True))
         self.rec.disable_timeline(ent.STAGE_TIMELINE)
 
@@ -273,7 +492,7 @@ class RerunRecorder:
             self.rec.set_time(ent.FMM_STEP_TIMELINE, sequence=step)
             self.rec.log(ent.trace_fmm(stamp.index), self._image(image))
             self.rec.log(ent.trace_fmm_label(stamp.index), rr.Boxes2D(
-                array=[0, 0, width, height], array_format=rr.Box2DFormat.XYWH, colors=[(255, 255, 255, 60)],
+                array=[0, 0, width, height], array_format=rr.Box2DFormat.XYWH, colors=[LABEL_COLOUR],
                 labels=[f"frame {stamp.index}: Fast Marching, {filled} of {total} pixels filled "
                         f"(neighbour {result.fills[0].offset:+d})"], show_labels=True))
         self.rec.disable_timeline(ent.FMM_STEP_TIMELINE)
@@ -283,6 +502,34 @@ class RerunRecorder:
     def _set_time(self, stamp: Stamp) -> None:
         self.rec.set_time(ent.FRAME_TIMELINE, sequence=stamp.index)
         self.rec.set_time(ent.VIDEO_TIME_TIMELINE, duration=stamp.time_s)
+
+    def _frame(self, entity: str, stamp: Stamp, rgb: np.ndarray) -> None:
+        """A frame stream: H.264 samples (or a raw image with --lossless)."""
+        if self.lossless:
+            self.rec.log(entity, self._image(rgb))
+            return
+        track = self._tracks.get(entity)
+        if track is None:
+            track = self._tracks[entity] = VideoTrack(self.rec, entity, self._fps)
+        track.add(stamp, rgb)
+
+    def _classes(self, entity: str, classes: np.ndarray, legend: Sequence[tuple]) -> None:
+        """A class map: SegmentationImage with --lossless (hover names), else a paletted PNG (a few kB)."""
+        if self.lossless:
+            self.rec.log(entity, rr.SegmentationImage(classes))
+        else:
+            self.rec.log(entity, rr.EncodedImage(contents=palette_png(classes, legend), media_type="image/png"))
+
+    def _map(self, entity: str, values: np.ndarray, colormap: str, value_range: tuple[float, float]) -> None:
+        """A float map: float32 DepthImage with --lossless, else a 16-bit PNG (entities.MAP_STEPS)."""
+        values = visual.finite_or_nan(values)
+        if self.lossless:
+            self.rec.log(entity, rr.DepthImage(values, meter=1.0, colormap=colormap, depth_range=value_range))
+            return
+        step = ent.MAP_STEPS[entity]
+        self.rec.log(entity, rr.EncodedDepthImage(
+            png16(quantised_map(values, step)), media_type="image/png", meter=1.0 / step, colormap=colormap,
+            depth_range=(value_range[0] / step + 1, value_range[1] / step + 1)))
 
     def _image(self, rgb: np.ndarray) -> Any:
         if self.jpeg_quality is None:
@@ -298,9 +545,7 @@ class RerunRecorder:
         legend = [(0, "original", (0, 0, 0, 0)), (1, "mosaic", (40, 200, 90, 170)), (2, "fallback", (255, 200, 0, 200))]
         for offset in range(-max_offset, max_offset + 1):
             if offset:
-                hue = (offset + max_offset) / (2 * max_offset)
-                colour = tuple(int(255 * c) for c in (hue, 0.3, 1.0 - hue)) + (190,)
-                legend.append((FILLED_BY_BASE + offset, f"neighbour {offset:+d}", colour))
+                legend.append((FILLED_BY_BASE + offset, f"neighbour {offset:+d}", _offset_colour(offset, 190)))
         return legend
 
     @staticmethod
@@ -322,16 +567,43 @@ class RerunRecorder:
         legend = [(0, "own frame", (0, 0, 0, 0)), (1, "refused: other content", (230, 40, 60, 200))]
         for offset in range(-max_offset, max_offset + 1):
             if offset:
-                hue = (offset + max_offset) / (2 * max_offset)
-                colour = tuple(int(255 * c) for c in (hue, 0.3, 1.0 - hue)) + (170,)
-                legend.append((FILLED_BY_BASE + offset, f"from neighbour {offset:+d}", colour))
+                legend.append((FILLED_BY_BASE + offset, f"from neighbour {offset:+d}", _offset_colour(offset, 170)))
         return legend
 
+    def _log_meta(self, report: Any = None) -> None:
+        """The about tab: a readable summary of the run, rewritten (static) as more becomes known."""
+        text = self._meta_markdown(self._info, self._config, report=report, crop=self._crop, warnings=self._warnings,
+                                   level=self.level, lossless=self.lossless,
+                                   seconds_logging=self.seconds_logging)
+        self.rec.log(ent.META, rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
+
     @staticmethod
-    def _meta_markdown(info: Any, config: Any) -> str:
-        return (f"# ffviz recording\n\n- ffviz {ffviz.__version__}\n- rerun-sdk {rr.__version__}\n"
-                f"- input: `{info.path}` ({info.width}x{info.height}, {float(info.fps):.3f} fps, "
-                f"{info.frame_count} frames)\n- config: `{config}`\n")
+    def _meta_markdown(info: Any, config: Any, *, report: Any = None, crop: Any = None, warnings: int = 0,
+                       level: str = "full", lossless: bool = False, seconds_logging: float = 0.0) -> str:
+        lines = ["# About this recording", "",
+                 f"- ffviz {ffviz.__version__}, rerun-sdk {rr.__version__} (open it with the same rerun version)"]
+        if info is not None:
+            lines.append(f"- input: `{info.path}`: {info.width}x{info.height}, {float(info.fps):.3f} frames/s, "
+                         f"{info.frame_count} frames")
+        lines.append(f"- recorded: `--record {level}`, " + ("lossless images (`--lossless`)" if lossless else
+                     "frame streams as H.264 video, masks as lossless PNG, maps as 16-bit PNG"))
+        if config is not None:
+            lines += ["", "## Settings", ""] + [f"- {row}" for row in _config_rows(config)]
+        if crop is not None:
+            lines.append(f"- crop window: x0 {crop.x0:.1f}, y0 {crop.y0:.1f}, scale {crop.scale:.3f} "
+                         f"({crop.cropping_ratio:.1%} of the area kept)")
+        lines += ["", "## Run", ""]
+        if report is not None:
+            seconds = float(getattr(report, "seconds_motion", 0.0)) + float(getattr(report, "seconds_render", 0.0))
+            lines.append(f"- {report.n_frames} frames in {seconds:.1f} s (motion pass "
+                         f"{report.seconds_motion:.1f} s, render pass {report.seconds_render:.1f} s; recording "
+                         f"{seconds_logging:.1f} s of it)")
+            if getattr(report, "cuts", None):
+                lines.append(f"- scene cuts at frames {', '.join(map(str, report.cuts))}")
+        else:
+            lines.append("- running (or interrupted): timings are written when the run finishes")
+        lines.append(f"- warnings: {warnings}" + (" (listed below)" if warnings else ""))
+        return "\n".join(lines) + "\n"
 
     def close(self) -> None:
         """Finish the file and move it into place."""
@@ -339,6 +611,8 @@ class RerunRecorder:
             return
         self._closed = True
         self._send_blueprint()
+        for track in self._tracks.values():
+            track.close()
         self.rec.flush()
         self.rec.disconnect()
         umask = os.umask(0)
@@ -353,3 +627,20 @@ class RerunRecorder:
         self._closed = True
         self.rec.disconnect()
         self._tmp_path.unlink(missing_ok=True)
+
+
+def _config_rows(config: Any) -> list[str]:
+    """One line per setting: `section.name = value`, nested dataclasses flattened."""
+    import dataclasses
+
+    if not dataclasses.is_dataclass(config):
+        return [f"`{config}`"]
+    rows: list[str] = []
+    for field in dataclasses.fields(config):
+        value = getattr(config, field.name)
+        if dataclasses.is_dataclass(value):
+            inner = ", ".join(f"{f.name}={getattr(value, f.name)!r}" for f in dataclasses.fields(value))
+            rows.append(f"**{field.name}**: {inner}")
+        else:
+            rows.append(f"**{field.name}**: {value!r}")
+    return rows

@@ -6,7 +6,8 @@ Any timeline can index a query (``frame`` by default; ``stage`` and ``fmm_step``
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass
+import io
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
@@ -18,7 +19,8 @@ from rerun.encodings import ChannelDatatype, ColorModel
 
 from ffviz import entities as ent
 
-IMAGE_COLUMNS = ("EncodedImage:blob", "Image:buffer", "DepthImage:buffer", "SegmentationImage:buffer")
+IMAGE_COLUMNS = ("EncodedImage:blob", "Image:buffer", "DepthImage:buffer", "SegmentationImage:buffer",
+                 "EncodedDepthImage:blob", "VideoStream:sample")
 _DTYPES = {ChannelDatatype.U8: np.uint8, ChannelDatatype.I8: np.int8, ChannelDatatype.U16: np.uint16,
            ChannelDatatype.I16: np.int16, ChannelDatatype.U32: np.uint32, ChannelDatatype.I32: np.int32,
            ChannelDatatype.U64: np.uint64, ChannelDatatype.I64: np.int64, ChannelDatatype.F16: np.float16,
@@ -31,6 +33,7 @@ class Recording:
     """Every chunk's record batch of a .rrd, grouped by entity path (without the leading slash)."""
 
     batches: dict[str, list]
+    _videos: dict[str, dict[int, np.ndarray]] = field(default_factory=dict, repr=False)
 
     @classmethod
     def load(cls, path: Path | str) -> "Recording":
@@ -113,7 +116,15 @@ class Recording:
         if found is None:
             raise KeyError(f"no image at {entity} {timeline}={index}")
         batch, row, column = found
+        if column == "VideoStream:sample":
+            return self.video_frames(entity)[index].copy()
         data = _blob(batch.column(column), row)
+        if column == "EncodedDepthImage:blob":
+            return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        if column == "EncodedImage:blob" and data[:4].tobytes() == b"\x89PNG" and data[25] == 3:
+            from PIL import Image as PILImage  # a paletted PNG is a class map: its indices are the classes
+
+            return np.asarray(PILImage.open(io.BytesIO(data.tobytes())))
         if column == "EncodedImage:blob":
             image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
             if image is None:
@@ -128,6 +139,55 @@ class Recording:
         if model in (ColorModel.BGR, ColorModel.BGRA):
             image = image[..., [2, 1, 0, 3][:channels]]
         return image.copy()
+
+    def map(self, entity: str, index: int, timeline: str = ent.FRAME_TIMELINE) -> np.ndarray:
+        """A float map in its units (NaN = no value), whether stored as 16-bit PNG (entities.MAP_STEPS) or float."""
+        image = self.image(entity, index, timeline)
+        if image.dtype == np.uint16 and entity in ent.MAP_STEPS:
+            return np.where(image > 0, (image.astype(np.float32) - 1) * np.float32(ent.MAP_STEPS[entity]), np.nan)
+        return image.astype(np.float32)
+
+    def video_samples(self, entity: str) -> list[tuple[int, bytes, bool]]:
+        """(frame, H.264 sample, is keyframe) of a VideoStream entity, in frame order."""
+        samples = []
+        for batch in self.batches.get(entity, []):
+            names = batch.schema.names
+            if ent.FRAME_TIMELINE not in names or "VideoStream:sample" not in names:
+                continue
+            frames = batch.column(ent.FRAME_TIMELINE).to_numpy(zero_copy_only=False)
+            keys = (batch.column("VideoStream:is_keyframe").to_pylist() if "VideoStream:is_keyframe" in names
+                    else [None] * batch.num_rows)
+            column = batch.column("VideoStream:sample")
+            for row in np.flatnonzero(column.is_valid().to_numpy(zero_copy_only=False)):
+                key = keys[row]
+                samples.append((int(frames[row]), _blob(column, int(row)).tobytes(),
+                                bool(key[0] if isinstance(key, list) else key)))
+        samples.sort(key=lambda s: s[0])
+        return samples
+
+    def video_codec(self, entity: str) -> int | None:
+        for batch in self.batches.get(entity, []):
+            if "VideoStream:codec" in batch.schema.names:
+                values = [v for v in batch.column("VideoStream:codec").to_pylist() if v]
+                if values:
+                    return values[0][0] if isinstance(values[0], list) else values[0]
+        return None
+
+    def video_frames(self, entity: str) -> dict[int, np.ndarray]:
+        """Every frame of a VideoStream entity decoded with PyAV (RGB uint8), by frame index; cached."""
+        if entity not in self._videos:
+            import av
+
+            decoder = av.CodecContext.create("h264", "r")
+            samples = self.video_samples(entity)
+            decoded = []
+            for _, data, _ in samples:
+                decoded += [f.to_ndarray(format="rgb24") for f in decoder.decode(av.Packet(data))]
+            decoded += [f.to_ndarray(format="rgb24") for f in decoder.decode(None)]
+            if len(decoded) != len(samples):
+                raise ValueError(f"{entity}: {len(samples)} samples decoded to {len(decoded)} frames")
+            self._videos[entity] = {frame: image for (frame, _, _), image in zip(samples, decoded)}
+        return self._videos[entity]
 
     def labels(self, entity: str, timeline: str = ent.FRAME_TIMELINE) -> dict[int, str]:
         """{time: first label} of a Boxes2D/Points2D entity on ``timeline``."""

@@ -34,3 +34,72 @@ def finite_or_nan(values: np.ndarray) -> np.ndarray:
     out = np.asarray(values, dtype=np.float32).copy()
     out[~np.isfinite(out)] = np.nan
     return out
+
+
+# -- colour keys (the viewer's colour maps, drawn as small images logged beside the views) -----------------
+
+_CV2_COLORMAPS = {"turbo": cv2.COLORMAP_TURBO, "viridis": cv2.COLORMAP_VIRIDIS, "magma": cv2.COLORMAP_MAGMA,
+                  "inferno": cv2.COLORMAP_INFERNO, "plasma": cv2.COLORMAP_PLASMA}
+KEY_BACKGROUND = (250, 250, 250)
+KEY_TEXT = (20, 20, 20)
+
+
+def _text(image: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.5) -> None:
+    cv2.putText(image, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, KEY_TEXT, 1, cv2.LINE_AA)
+
+
+def colour_bar(colormap: str, low: float, high: float, unit: str, title: str, *, width: int = 360,
+               ticks: int = 5, fmt: str = "{:g}") -> np.ndarray:
+    """RGB image: ``title``, a horizontal bar of ``colormap`` from ``low`` to ``high``, tick labels in ``unit``.
+
+    Dark text on white, so it reads on any viewer theme."""
+    height, margin, bar_h = 90, 14, 22
+    image = np.full((height, width, 3), KEY_BACKGROUND, np.uint8)
+    ramp = np.linspace(0, 255, width - 2 * margin).astype(np.uint8)[None, :]
+    bar = cv2.cvtColor(cv2.applyColorMap(np.repeat(ramp, bar_h, axis=0), _CV2_COLORMAPS[colormap]), cv2.COLOR_BGR2RGB)
+    image[26:26 + bar_h, margin:width - margin] = bar
+    _text(image, title, (margin, 18))
+    for i in range(ticks):
+        x = margin + round(i * (width - 2 * margin - 1) / (ticks - 1))
+        cv2.line(image, (x, 26 + bar_h), (x, 26 + bar_h + 5), KEY_TEXT, 1)
+        label = fmt.format(low + (high - low) * i / (ticks - 1))
+        size = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, 0.42, 1)[0][0]
+        _text(image, label, (int(np.clip(x - size // 2, 0, width - size)), 26 + bar_h + 20), 0.42)
+    _text(image, unit, (margin, height - 4), 0.42)
+    return image
+
+
+def flow_wheel(size: int = 200) -> np.ndarray:
+    """The flow colour key: hue = direction, saturation = magnitude (rim: the frame's flow scale)."""
+    height = size + 40
+    image = np.full((height, size, 3), KEY_BACKGROUND, np.uint8)
+    radius = size // 2 - 20
+    ys, xs = np.mgrid[-radius:radius + 1, -radius:radius + 1].astype(np.float32)
+    flow = np.stack([xs, ys], axis=-1) / radius
+    inside = np.hypot(xs, ys) <= radius
+    wheel = flow_to_rgb(flow, max_magnitude=1.0)
+    top, left = 20, size // 2 - radius
+    region = image[top:top + 2 * radius + 1, left:left + 2 * radius + 1]
+    region[inside] = wheel[inside]
+    centre = (size // 2, top + radius)
+    _text(image, "flow direction = hue", (6, 14), 0.42)
+    _text(image, "+x", (centre[0] + radius - 14, centre[1] + 5), 0.4)
+    _text(image, "+y (down)", (centre[0] - 30, top + 2 * radius + 14), 0.4)
+    _text(image, "rim: 99th pct magnitude", (6, height - 6), 0.4)
+    return image
+
+
+def palette_key(entries: list[tuple[str, tuple[int, ...]]], title: str, *, width: int = 360) -> np.ndarray:
+    """RGB image: one swatch and name per class (alpha shown against white)."""
+    row = 20
+    image = np.full((26 + row * len(entries), width, 3), KEY_BACKGROUND, np.uint8)
+    _text(image, title, (8, 16))
+    for i, (name, colour) in enumerate(entries):
+        y = 24 + i * row
+        rgb = np.array(colour[:3], float)
+        alpha = (colour[3] / 255.0) if len(colour) > 3 else 1.0
+        swatch = (alpha * rgb + (1 - alpha) * np.array(KEY_BACKGROUND)).astype(int)
+        cv2.rectangle(image, (8, y + 2), (30, y + row - 4), tuple(int(c) for c in swatch), -1)
+        cv2.rectangle(image, (8, y + 2), (30, y + row - 4), KEY_TEXT, 1)
+        _text(image, name, (38, y + row - 6), 0.42)
+    return image
