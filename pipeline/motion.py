@@ -11,12 +11,14 @@ so the camera path is never flung by one bad pair.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Literal
 
 import cv2
 import numpy as np
+import scipy.spatial
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
@@ -24,6 +26,10 @@ from pipeline.errors import ConfigError
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
 RANSAC_SEED = 0x5EED
+# A second motion is looked for among RANSAC's outliers when they are at least this share of the tracks ...
+ALTERNATIVE_MIN_SHARE = 0.15
+ALTERNATIVE_MIN_SHIFT_PX = 2.0  # ... and kept when it moves the frame this much differently (working px)
+ALTERNATIVE_PRIOR_PX = 2.0  # the alternative must continue the camera path this much better to be taken
 MOTION_MODELS: tuple[str, ...] = ("affine", "similarity", "homography")
 REFINEMENTS: tuple[str, ...] = ("none", "ecc")
 
@@ -74,6 +80,13 @@ class MotionEstimate:
     prev_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     curr_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     inliers: np.ndarray = field(default_factory=lambda: np.zeros((0,), bool))
+    # The second motion the tracks hold (a large moving object, or the background when the object won RANSAC),
+    # full-resolution 3x3, and the tracks that support it; None when there is none. ``choose_background``
+    # decides which is the camera's.
+    alternative: np.ndarray | None = None
+    alternative_prev_points: np.ndarray | None = None  # (M, 2) its supporting tracks, full-resolution px
+    alternative_curr_points: np.ndarray | None = None
+    chose_alternative: bool = False  # the RANSAC winner was a moving object: the alternative was taken
 
     @property
     def inlier_ratio(self) -> float:
@@ -125,6 +138,9 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
         prev_points=work.prev_points * to_full,
         curr_points=work.curr_points * to_full,
         inliers=work.inliers,
+        alternative=None if work.alternative is None else geometry.rescale_transform(work.alternative, curr.scale),
+        alternative_prev_points=None if work.alternative is None else work.alternative_points[0] * to_full,
+        alternative_curr_points=None if work.alternative is None else work.alternative_points[1] * to_full,
     )
     if failure is None:
         return MotionEstimate(curr_from_prev=full_transform, status="ok", **tracks)
@@ -151,6 +167,8 @@ class _WorkEstimate:
     prev_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     curr_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     inliers: np.ndarray = field(default_factory=lambda: np.zeros((0,), bool))
+    alternative: np.ndarray | None = None
+    alternative_points: tuple[np.ndarray, np.ndarray] | None = None  # (prev, curr) tracks supporting it
 
 
 def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig) -> _WorkEstimate:
@@ -198,12 +216,95 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
             if lk_pass > 0:
                 break  # refinement only ever improves an accepted estimate: keep pass 1's
             return candidate
+        if lk_pass == 0:
+            candidate.alternative, candidate.alternative_points = _second_motion(prev_pts, curr_pts, inliers,
+                                                                               candidate.curr_from_prev, config)
+        else:  # the refining pass tracks against the first motion: the second keeps its first-pass tracks
+            candidate.alternative, candidate.alternative_points = result.alternative, result.alternative_points
         result = candidate
         curr_from_prev = result.curr_from_prev
     inl = result.inliers
     projected = geometry.apply(result.curr_from_prev, result.prev_points[inl])
     result.residual_px = float(np.sqrt(np.mean(np.sum((projected - result.curr_points[inl]) ** 2, axis=1))))
     return result
+
+
+def _second_motion(prev_pts: np.ndarray, curr_pts: np.ndarray, inliers: np.ndarray, first: np.ndarray,
+                   config: MotionConfig) -> tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
+    """A second consistent motion among the first fit's outliers: RANSAC keeps the motion most tracks agree on,
+    which is a large textured object's once it holds more tracks than the background. None when the outliers
+    are too few (under ALTERNATIVE_MIN_SHARE of the tracks) or agree with nothing, or the motion is the first's."""
+    outliers = ~inliers
+    needed = max(config.min_inliers, int(ALTERNATIVE_MIN_SHARE * len(inliers)))
+    if outliers.sum() < needed:
+        return None, None
+    matrix, mask = _fit_model(prev_pts[outliers], curr_pts[outliers], config)
+    if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < needed:
+        return None, None
+    second = geometry.to_3x3(matrix)
+    if corner_shift(second, first, prev_pts) < ALTERNATIVE_MIN_SHIFT_PX:
+        return None, None
+    support = mask.ravel().astype(bool)
+    return second, (prev_pts[outliers][support], curr_pts[outliers][support])
+
+
+def corner_shift(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> float:
+    """Mean distance (px) between where two transforms take the bounding box corners of ``points`` (N, 2)."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]], np.float64)
+    return float(np.mean(np.linalg.norm(geometry.apply(a, corners) - geometry.apply(b, corners), axis=1)))
+
+
+def choose_background(estimate: MotionEstimate, previous: MotionEstimate | None, width: int,
+                      height: int) -> MotionEstimate:
+    """The camera's motion between the two motions a pair holds (RANSAC keeps the one most tracks agree on,
+    which is a large textured object's once it holds more tracks than the background).
+
+    With no pair before (the first pair, or after a failed one), by spread: see _spread's caller. Where the pair
+    before also held two motions, by place: this pair's tracks start in the frame the pair before
+    ended in, so each of its tracks is labelled by the nearest track end of the pair before (background or
+    object); the motion whose tracks lie mostly in the background's places is the camera's. An object moves
+    10-25 px a frame, far less than its own size, so the places carry over. Otherwise by continuity: the motion
+    that continues the previous pair's camera motion better by ALTERNATIVE_PRIOR_PX (hand shake changes the
+    camera's motion by a few px from one pair to the next)."""
+    if estimate.alternative is None or estimate.status != "ok":
+        return estimate
+    swap = False
+    kept_points = estimate.prev_points[estimate.inliers]
+    if previous is None or previous.status != "ok":
+        # Nothing before to go by: the background surrounds what moves in front of it, so its tracks spread
+        # wider (a robust bounding box) unless the object fills the frame edge to edge.
+        swap = _spread(estimate.alternative_prev_points) > _spread(kept_points)
+    elif previous.alternative is not None and len(kept_points):
+        background_ends = previous.curr_points[previous.inliers]  # in this pair's first frame
+        object_ends = previous.alternative_curr_points
+        ends = np.concatenate([background_ends, object_ends])
+        is_background = np.r_[np.ones(len(background_ends), bool), np.zeros(len(object_ends), bool)]
+        tree = scipy.spatial.cKDTree(ends)
+        kept = is_background[tree.query(kept_points, k=1)[1]].mean()
+        other = is_background[tree.query(estimate.alternative_prev_points, k=1)[1]].mean()
+        swap = other > kept
+    else:
+        corners = geometry.frame_corners(width, height)
+        kept = corner_shift(estimate.curr_from_prev, previous.curr_from_prev, corners)
+        other = corner_shift(estimate.alternative, previous.curr_from_prev, corners)
+        swap = other + ALTERNATIVE_PRIOR_PX < kept
+    if not swap:
+        return estimate
+    return dataclasses.replace(
+        estimate, curr_from_prev=estimate.alternative, alternative=estimate.curr_from_prev,
+        prev_points=estimate.alternative_prev_points, curr_points=estimate.alternative_curr_points,
+        inliers=np.ones(len(estimate.alternative_prev_points), bool), n_inliers=len(estimate.alternative_prev_points),
+        alternative_prev_points=kept_points, alternative_curr_points=estimate.curr_points[estimate.inliers],
+        chose_alternative=True)
+
+
+def _spread(points: np.ndarray) -> float:
+    """Area of the 2nd-98th percentile box of (N, 2) points."""
+    if len(points) < 2:
+        return 0.0
+    lo, hi = np.percentile(points, 2, axis=0), np.percentile(points, 98, axis=0)
+    return float(np.prod(hi - lo))
 
 
 def _detect_corners(gray: np.ndarray, config: MotionConfig) -> np.ndarray:

@@ -108,11 +108,14 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
             return pair, motion.MotionEstimate(np.eye(3), "cut", warning="frame size changed: treated as a cut")
         return pair, motion.estimate(pair.previous, pair.prepared, config)
 
+    previous: motion.MotionEstimate | None = None  # the pair before, for motion.choose_background
     try:
         with one_pass(source) as decoded:
             for pair, estimate in parallel.ordered_map(estimate_pair, pairs(decoded), workers):
                 frame = pair.frame
                 stamp = Stamp(frame.index, frame.time_s)
+                estimate = motion.choose_background(estimate, previous, pair.prepared.width, pair.prepared.height)
+                previous = estimate
                 for message in pair.decoder_warnings:  # decoder complaints (corrupt packets skipped)
                     warnings.append((frame.index, message))
                     observer.on_warning(stamp, message)
