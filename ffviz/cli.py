@@ -123,6 +123,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grpc-port", type=int, default=9876, metavar="PORT",
                    help="TCP port on 127.0.0.1 from which the page streams the recording (default: %(default)s)")
 
+    p = commands.add_parser("snapshot", help="a PNG of what the viewer shows for a recording at a frame, on a tab",
+                            description="Render what the Rerun viewer shows for RECORDING at --frame on --tab, "
+                                        "headless (the native viewer without a window; needs `ffmpeg` on PATH to "
+                                        "decode the frame streams), to a PNG for reviews, docs and tests.")
+    p.add_argument("recording", type=Path, metavar="RECORDING", help="a .rrd file written by ffviz")
+    p.add_argument("--frame", type=int, default=0, metavar="N",
+                   help="frame number (from 0) to show (default: %(default)s)")
+    p.add_argument("--tab", default="overview", metavar="NAME",
+                   help="tab to show: overview, motion, smoothing, mosaic, local flow + motion inpainting, "
+                        "deblurring, stage stepping or about; a unique prefix is enough (default: %(default)s)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="PNG", help="PNG file to write (required)")
+    p.add_argument("--size", default="1280x800", metavar="WxH",
+                   help="viewer window size in points; the PNG may be at twice that (default: %(default)s)")
+
     p = commands.add_parser("figures", help="render the thesis-style figures from a recording (PNG, PDF or SVG)",
                             description="Render figures (trajectories, stabilized vs original, completion, motion "
                                         "inpainting, deblurring, blurriness, mosaic variance) from a recording "
@@ -183,6 +197,13 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
                    help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "
                         "shear) or homography (also perspective) (default: %(default)s)")
+    p.add_argument("--ignore", action="append", default=[], metavar="X,Y,W,H[@T0-T1]",
+                   help="a box (px: left, top, width, height) whose features motion estimation does not use, e.g. "
+                        "a logo or a person in front of the camera; @T0-T1 limits it to that time (seconds; "
+                        "either end may be left out: @5- or @-2.5); may be given several times (default: none)")
+    p.add_argument("--ignore-mask", metavar="IMAGE_OR_VIDEO", default=None,
+                   help="image (for every frame) or video (frame by frame) of the input's size: white pixels' "
+                        "features are not used by motion estimation (default: none)")
     p.add_argument("--refine", choices=motion.REFINEMENTS, default="none",
                    help="ecc: refine each motion estimate by hierarchical coarse-to-fine direct alignment "
                         "(slower) (default: %(default)s)")
@@ -201,6 +222,11 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                        help="also write a Rerun recording of every step to FILE; --rrd alone: "
                             "recordings/<input name>.rrd (default: %s)"
                             % (rrd_default if rrd_default is not None else "no recording"))
+    if not rrd_folder:
+        p.add_argument("--view", action="store_true",
+                       help="watch the run live in Rerun's web viewer on 127.0.0.1:9090 (the URL is printed) while "
+                            "it also writes the recording (--rrd, default recordings/<input name>.rrd); keeps "
+                            "serving after the run until Ctrl-C (default: off)")
     p.add_argument("--record", choices=("summary", "full"), default="full",
                    help="recording detail: summary (series and output frames) or full (every intermediate) "
                         "(default: %(default)s)")
@@ -274,6 +300,18 @@ def cmd_view(args: argparse.Namespace) -> int:
     return serve(args.recording, web_port=args.web_port, grpc_port=args.grpc_port, native=args.native)
 
 
+def cmd_snapshot(args: argparse.Namespace) -> int:
+    from ffviz.snapshot import snapshot
+
+    try:
+        width, height = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise ConfigError(f"--size {args.size!r}: expected WIDTHxHEIGHT, e.g. 1280x800") from None
+    written = snapshot(args.recording, args.output, frame=args.frame, tab=args.tab, size=(width, height))
+    print(f"wrote {written} (frame {args.frame}, tab {args.tab})")
+    return 0
+
+
 def cmd_figures(args: argparse.Namespace) -> int:
     from ffviz.figures import render_figures
 
@@ -298,6 +336,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics, "view": cmd_view,
+            "snapshot": cmd_snapshot,
             "figures": cmd_figures, "batch": cmd_batch, "bench": cmd_bench}
 
 

@@ -39,12 +39,31 @@ def _check_options(args: argparse.Namespace) -> None:
                           f"not {args.smoothing_sigma}")
 
 
+def parse_ignore(text: str) -> motion.IgnoreRegion:
+    """--ignore X,Y,W,H[@T0-T1] as a motion.IgnoreRegion; ConfigError naming the option when malformed."""
+    box, _, times = text.partition("@")
+    try:
+        x, y, width, height = (int(v) for v in box.split(","))
+        start = end = None
+        if times:
+            first, dash, last = times.partition("-")
+            if not dash:
+                raise ValueError
+            start = float(first) if first else None
+            end = float(last) if last else None
+    except ValueError:
+        raise ConfigError(f"--ignore {text!r}: expected X,Y,W,H or X,Y,W,H@T0-T1 (integers px, seconds)") from None
+    return motion.IgnoreRegion(x, y, width, height, start, end)
+
+
 def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
     _check_options(args)
     try:
         return stab.StabilizeConfig(
             mode=args.mode,
-            motion=motion.MotionConfig(model=args.motion_model, refine=args.refine),
+            motion=motion.MotionConfig(model=args.motion_model, refine=args.refine,
+                                       ignore=tuple(parse_ignore(text) for text in getattr(args, "ignore", [])),
+                                       ignore_mask=getattr(args, "ignore_mask", None)),
             smoothing=smoothing.SmoothingConfig(
                 radius=args.smoothing_radius, sigma=args.smoothing_sigma,
                 path="tripod" if getattr(args, "tripod", False) else getattr(args, "path", "gaussian"),
@@ -110,12 +129,19 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
     config = stabilize_config(args)
     encoding = output_encoding(args)
     rrd_path = recording_path(args, input_path)
+    live = None
+    if getattr(args, "view", False):  # --view: a web viewer the run streams into, and the .rrd as well
+        from ffviz.viewer import LiveViewer
+
+        rrd_path = rrd_path or DEFAULT_RECORDINGS / f"{input_path.stem}.rrd"
+        live = LiveViewer()
+        print(f"live view: {live.url}", flush=True)
     recorder = None
     if rrd_path is not None:
         from ffviz.recorder import RerunRecorder
 
         recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80,
-                                 trace_frames=args.frames)
+                                 trace_frames=args.frames, live_url=live.grpc_url if live else None)
     try:
         report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
                                 progress=tqdm_progress, overwrite=overwrite, encoding=encoding,
@@ -123,10 +149,15 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
     except BaseException:
         if recorder is not None:
             recorder.abort()
+        if live is not None:
+            live.stop()
         raise
     _print_report(report, rrd_path)
     if final_line:
         print(written_line([(report.output_path, "stabilized video")], rrd_path), flush=True)
+    if live is not None:
+        print(f"live view still serving at {live.url} (Ctrl-C to stop)", flush=True)
+        live.wait()
     return report
 
 

@@ -35,6 +35,31 @@ REFINEMENTS: tuple[str, ...] = ("none", "ecc")
 
 
 @dataclass(frozen=True)
+class IgnoreRegion:
+    """A box (full-resolution px, top-left x, y, width, height) whose features motion estimation ignores (a logo,
+    a dashboard, a person), from ``start_s`` to ``end_s`` (seconds of the input; None: from the start / to the
+    end)."""
+
+    x: int
+    y: int
+    width: int
+    height: int
+    start_s: float | None = None
+    end_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.width <= 0 or self.height <= 0 or self.x < 0 or self.y < 0:
+            raise ConfigError(f"ignore box {self.x},{self.y},{self.width},{self.height}: x and y must be >= 0, "
+                              f"width and height > 0")
+        if self.start_s is not None and self.end_s is not None and not self.start_s <= self.end_s:
+            raise ConfigError(f"ignore box time range {self.start_s:g}-{self.end_s:g}: the start must not be after "
+                              f"the end")
+
+    def active(self, time_s: float) -> bool:
+        return (self.start_s is None or time_s >= self.start_s) and (self.end_s is None or time_s <= self.end_s)
+
+
+@dataclass(frozen=True)
 class MotionConfig:
     model: MotionModel = "affine"
     refine: Refinement = "none"
@@ -57,8 +82,12 @@ class MotionConfig:
     ecc_levels: int = 3
     ecc_iterations: int = 50
     ecc_epsilon: float = 1e-5
+    ignore: tuple[IgnoreRegion, ...] = ()  # boxes whose features are not used (--ignore)
+    ignore_mask: str | None = None  # image or video, white = ignore (--ignore-mask); pipeline.stabilize reads it
 
     def __post_init__(self) -> None:
+        if not all(isinstance(region, IgnoreRegion) for region in self.ignore):
+            raise ConfigError("motion ignore regions must be IgnoreRegion boxes")
         if self.model not in MOTION_MODELS:
             raise ConfigError(f"motion model must be one of {', '.join(MOTION_MODELS)}, not {self.model!r}")
         if self.refine not in REFINEMENTS:
@@ -102,9 +131,11 @@ class PreparedFrame:
     scale: float  # working size / full size
     width: int
     height: int
+    ignore: np.ndarray | None = None  # bool, working size: features here are not used (IgnoreRegion, --ignore-mask)
 
 
-def prepare(rgb: np.ndarray, config: MotionConfig) -> PreparedFrame:
+def prepare(rgb: np.ndarray, config: MotionConfig, ignore: np.ndarray | None = None) -> PreparedFrame:
+    """``ignore``: bool (H, W) at full resolution, where features are not used (None: none)."""
     height, width = rgb.shape[:2]
     scale = min(1.0, config.max_side / max(width, height))
     small = rgb if scale == 1.0 else cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
@@ -112,7 +143,10 @@ def prepare(rgb: np.ndarray, config: MotionConfig) -> PreparedFrame:
     hsv = cv2.cvtColor(small, cv2.COLOR_RGB2HSV)
     hist = cv2.calcHist([hsv], [0, 1], None, [30, 32], [0, 180, 0, 256])
     cv2.normalize(hist, hist, alpha=1.0, norm_type=cv2.NORM_L1)
-    return PreparedFrame(gray=gray, hist=hist, scale=scale, width=width, height=height)
+    if ignore is not None:
+        ignore = ignore if scale == 1.0 else cv2.resize(ignore.view(np.uint8), (gray.shape[1], gray.shape[0]),
+                                                           interpolation=cv2.INTER_NEAREST).view(bool)
+    return PreparedFrame(gray=gray, hist=hist, scale=scale, width=width, height=height, ignore=ignore)
 
 
 def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> MotionEstimate:
@@ -123,7 +157,7 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
     """
     cv2.setRNGSeed(RANSAC_SEED)
     hist_distance = float(cv2.compareHist(prev.hist, curr.hist, cv2.HISTCMP_BHATTACHARYYA))
-    work = _track_and_fit(prev.gray, curr.gray, config)
+    work = _track_and_fit(prev.gray, curr.gray, config, prev.ignore)
     if config.refine == "ecc":
         work = _refine_ecc(prev.gray, curr.gray, work, config)
 
@@ -171,8 +205,13 @@ class _WorkEstimate:
     alternative_points: tuple[np.ndarray, np.ndarray] | None = None  # (prev, curr) tracks supporting it
 
 
-def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig) -> _WorkEstimate:
+def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig,
+                   ignore: np.ndarray | None = None) -> _WorkEstimate:
     corners = _detect_corners(prev_gray, config)
+    if ignore is not None and len(corners):
+        x = np.clip(np.round(corners[:, 0]).astype(int), 0, ignore.shape[1] - 1)
+        y = np.clip(np.round(corners[:, 1]).astype(int), 0, ignore.shape[0] - 1)
+        corners = corners[~ignore[y, x]]
     if len(corners) < config.min_inliers:
         return _WorkEstimate(geometry.IDENTITY.copy(), f"featureless frame ({len(corners)} corners)")
 

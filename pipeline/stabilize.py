@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Iterator, Literal
 
+import cv2
 import numpy as np
 
 from pipeline import completion, deblur, motion, neighbours, parallel, smoothing, video_io, warping
@@ -85,19 +86,22 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
     bar = progress("pass 1/2: motion", total)
     frames_range = frames
 
+    ignore = _IgnoreMasks(config, source.info.width, source.info.height)
+
     def pairs(decoded: Iterable[video_io.Frame]) -> Iterator[_MotionPair]:
         """Each frame with its predecessor, prepared (downscaled, histogram) on this thread."""
         previous: motion.PreparedFrame | None = None
         for frame in decoded:
+            mask = ignore.at(frame)
             if frames_range is not None and frame.index >= frames_range.stop:
                 source.drain_warnings()  # the next segment's
                 return
             if frames_range is not None and frame.index < frames_range.start:
                 source.drain_warnings()  # an earlier segment's
                 if frame.index == frames_range.start - 1:
-                    previous = motion.prepare(frame.rgb, config)
+                    previous = motion.prepare(frame.rgb, config, mask)
                 continue
-            prepared = motion.prepare(frame.rgb, config)
+            prepared = motion.prepare(frame.rgb, config, mask)
             yield _MotionPair(frame, previous, prepared, source.drain_warnings())
             previous = prepared
 
@@ -130,9 +134,63 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
         _forward_warnings(source, None, observer, warnings)
     finally:
         bar.close()
+        ignore.close()
     if not transforms:
         raise InputError(f"{source.info.path}: no decodable video frames")
     return MotionPass(np.array(transforms), statuses, times, warnings)
+
+
+class _IgnoreMasks:
+    """Where motion estimation ignores features, frame by frame: the config's boxes active at the frame's time,
+    and the --ignore-mask image (one for every frame) or video (frame by frame), white meaning ignore. Checked
+    against the input's size when made (one-line errors)."""
+
+    def __init__(self, config: motion.MotionConfig, width: int, height: int) -> None:
+        self.boxes = config.ignore
+        self.size = (width, height)
+        for box in self.boxes:
+            if box.x + box.width > width or box.y + box.height > height:
+                raise ConfigError(f"ignore box {box.x},{box.y},{box.width},{box.height} reaches outside the "
+                                  f"{width}x{height} frame")
+        self.still: np.ndarray | None = None
+        self.reader: video_io.VideoReader | None = None
+        self.frames: Iterator[video_io.Frame] | None = None
+        if config.ignore_mask is not None:
+            path = Path(config.ignore_mask)
+            if not path.is_file():
+                raise InputError(f"ignore mask not found: {path}")
+            image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+            if image is not None:
+                self.still = self._checked(image > 127, path)
+            else:
+                self.reader = video_io.VideoReader(path)
+                self.frames = iter(self.reader)
+                self.path = path
+
+    def _checked(self, mask: np.ndarray, path: Path) -> np.ndarray:
+        if (mask.shape[1], mask.shape[0]) != self.size:
+            raise InputError(f"ignore mask {path} is {mask.shape[1]}x{mask.shape[0]}, the video "
+                             f"{self.size[0]}x{self.size[1]}")
+        return mask
+
+    def at(self, frame: video_io.Frame) -> np.ndarray | None:
+        mask = self.still
+        if self.frames is not None:
+            picture = next(self.frames, None)
+            if picture is None:
+                raise InputError(f"ignore mask video {self.path} ends before frame {frame.index}")
+            mask = self._checked(picture.rgb.max(axis=2) > 127, self.path)
+        active = [box for box in self.boxes if box.active(frame.time_s)]
+        if not active:
+            return mask
+        mask = np.zeros((self.size[1], self.size[0]), bool) if mask is None else mask.copy()
+        for box in active:
+            mask[box.y:box.y + box.height, box.x:box.x + box.width] = True
+        return mask
+
+    def close(self) -> None:
+        if self.reader is not None:
+            self.reader.close()
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,9 @@ BAD = {
     local_flow.LocalFlowConfig: [dict(method="nope"), dict(dis_preset="nope")],
     metrics.MetricsConfig: [dict(feature="surf"), dict(max_side=8)],
     mosaic.MosaicConfig: [dict(min_neighbours=1), dict(variance_threshold=0.0)],
-    motion.MotionConfig: [dict(model="nope"), dict(refine="nope")],
+    motion.MotionConfig: [dict(model="nope"), dict(refine="nope"), dict(ignore=((0, 0, 5, 5),))],
+    motion.IgnoreRegion: [dict(x=0, y=0, width=0, height=5), dict(x=-1, y=0, width=5, height=5),
+                          dict(x=0, y=0, width=5, height=5, start_s=3.0, end_s=1.0)],
     smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0), dict(path="nope")],
     l1_path.L1PathConfig: [dict(margin_fraction=0.0), dict(margin_deg=-1.0), dict(window=4), dict(overlap=2),
                            dict(window=100, overlap=60)],
@@ -38,6 +40,8 @@ BAD = {
     video_io.Encoding: [dict(codec="nope"), dict(crf=52), dict(preset="nope"), dict(qscale=1)],
 }
 CASES = [(cls, kwargs) for cls, bad in BAD.items() for kwargs in bad]
+# Classes with required fields: a valid set, which each bad case overrides.
+VALID = {motion.IgnoreRegion: dict(x=0, y=0, width=5, height=5)}
 
 
 def test_config_error_is_an_ffviz_error_and_a_value_error():
@@ -47,9 +51,9 @@ def test_config_error_is_an_ffviz_error_and_a_value_error():
 
 @pytest.mark.parametrize("cls, kwargs", CASES, ids=[f"{c.__name__}-{next(iter(k))}" for c, k in CASES])
 def test_bad_value_raises_config_error(cls, kwargs):
-    cls()  # the defaults are valid
+    cls(**VALID.get(cls, {}))  # the defaults are valid
     with pytest.raises(ConfigError) as info:
-        cls(**kwargs)
+        cls(**{**VALID.get(cls, {}), **kwargs})
     assert "\n" not in str(info.value)
 
 

@@ -66,3 +66,68 @@ def test_first_pair_prefers_the_motion_whose_tracks_spread_wider():
     # One motion only: nothing to choose.
     single = motion.MotionEstimate(curr_from_prev=camera, status="ok")
     assert motion.choose_background(single, None, 640, 360) is single
+
+
+def estimate_motion_errors(video, config):
+    found = estimate_motion(ArraySource(video.frames, fps=30, name="truth"), config, observer=NullObserver(),
+                            progress=null_progress, total=None)
+    return max(geometry.corner_error(found.curr_from_prev[t], video.curr_from_prev[t], 640, 360)
+               for t in range(1, video.n_frames))
+
+
+def test_an_ignore_mask_video_keeps_features_off_the_figure(tmp_path, monkeypatch):
+    """A mask video of the figure (white where it is, frame by frame): every feature on it is dropped, so even
+    RANSAC alone (the automatic choice switched off) follows the background."""
+    import cv2
+    from pipeline import synthetic
+
+    monkeypatch.setattr(motion, "choose_background", lambda estimate, *args: estimate)
+    video = generate(SyntheticConfig(n_frames=30, object_kind="person", person_size=(0.9, 1.0), seed=2,
+                                     blurred_frames=(), image="astronaut", object_sweep=0.15))
+    assert estimate_motion_errors(video, motion.MotionConfig()) > 10.0  # RANSAC follows the figure
+    grown = [cv2.dilate(m.astype(np.uint8), np.ones((17, 17), np.uint8)) * 255 for m in video.object_mask]
+    mask_video = tmp_path / "mask.mp4"
+    synthetic.write_video((np.repeat(m[:, :, None], 3, axis=2) for m in grown), mask_video, fps=30.0, crf=0)
+    assert estimate_motion_errors(video, motion.MotionConfig(ignore_mask=str(mask_video))) < 0.5
+
+
+def test_ignore_boxes_drop_the_features_inside_them_while_active():
+    video = generate(SyntheticConfig(n_frames=2, moving_object=False, blurred_frames=()))
+    config = motion.MotionConfig()
+    box = motion.IgnoreRegion(100, 50, 300, 200, start_s=0.0, end_s=1.0)
+    mask = np.zeros((360, 640), bool)
+    mask[50:250, 100:400] = True
+    first = motion.prepare(video.frames[0], config, mask)
+    estimate = motion.estimate(first, motion.prepare(video.frames[1], config), config)
+    inside = (estimate.prev_points[:, 0] > 100.5) & (estimate.prev_points[:, 0] < 398.5) & \
+        (estimate.prev_points[:, 1] > 50.5) & (estimate.prev_points[:, 1] < 248.5)
+    assert len(estimate.prev_points) > 50 and not inside.any()
+    assert geometry.corner_error(estimate.curr_from_prev, video.curr_from_prev[1], 640, 360) < 0.2
+    assert box.active(0.5) and not box.active(1.5) and motion.IgnoreRegion(0, 0, 1, 1, start_s=2.0).active(9.0)
+
+
+def test_ignore_options_on_the_command_line_and_their_errors(tmp_path, capsys):
+    import cv2
+    from ffviz import cli
+    from pipeline import synthetic
+
+    video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=12, seed=3,
+                                                         blurred_frames=()))
+    source = tmp_path / "shaky.mp4"
+    synthetic.write_video(video, source)
+    mask = tmp_path / "mask.png"
+    cv2.imwrite(str(mask), np.zeros((180, 320), np.uint8))
+    common = ["stabilize", str(source), "--mode", "none", "--no-deblur"]
+    assert cli.main([*common, "-o", str(tmp_path / "a.mp4"), "--ignore", "10,10,50,40@0.1-", "--ignore",
+                     "200,0,20,20", "--ignore-mask", str(mask)]) == 0
+    capsys.readouterr()
+    wrong_size = tmp_path / "small.png"
+    cv2.imwrite(str(wrong_size), np.zeros((90, 160), np.uint8))
+    for bad, words in ((["--ignore", "10,10,50"], "--ignore"), (["--ignore", "300,10,50,40"], "outside"),
+                       (["--ignore", "1,1,5,5@3-1"], "start"), (["--ignore-mask", str(wrong_size)], "160x90"),
+                       (["--ignore-mask", str(tmp_path / "none.png")], "not found")):
+        out = tmp_path / "b.mp4"
+        assert cli.main([*common, "-o", str(out), *bad]) == 2, bad
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], (bad, err)
+        assert not out.exists()
