@@ -9,6 +9,7 @@ observer calls on the pipeline's thread (closing included, which waits for the S
 finish), and its share of the run. On a loaded machine the wall-clock overhead swings by +-20 % from run to
 run; the recorder's own time does not. Summary recording should add at most 15 % (issue 5).
 Usage: python benchmarks/recording_cost.py [--frames 100] [--repeats 3] [--full-repeats 2] [--modes none,full]
+       [--clip ../shared/videos/vplab_C.avi]  (a real clip instead of the synthetic one)
 """
 
 from __future__ import annotations
@@ -54,13 +55,18 @@ class TimedRecorder(RerunRecorder):
         self._timed(super().on_finish, report)
 
 
+CPU_SECONDS: dict[tuple[str, str | None], list[float]] = {}
+
+
 def run_once(clip: Path, folder: Path, mode: str, level: str | None) -> tuple[float, float, int]:
-    """Wall seconds of one run, seconds inside the recorder, and the recording's size in bytes."""
+    """Wall seconds of one run, seconds inside the recorder, and the recording's size in bytes (CPU seconds of
+    the process, all threads, go to CPU_SECONDS)."""
     rrd = folder / f"{mode}_{level}.rrd"
     recorder = TimedRecorder(rrd, level=level) if level else None
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     stabilize(clip, folder / f"{mode}.mp4", StabilizeConfig(mode=mode), observer=recorder, overwrite=True)
     seconds = time.perf_counter() - started
+    CPU_SECONDS.setdefault((mode, level), []).append(time.process_time() - cpu_started)
     return seconds, recorder.seconds if recorder else 0.0, rrd.stat().st_size if level else 0
 
 
@@ -70,17 +76,27 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="runs per configuration in --mode none")
     parser.add_argument("--full-repeats", type=int, default=2, help="runs per configuration in --mode full (slow)")
     parser.add_argument("--modes", default="none,full")
+    parser.add_argument("--clip", type=Path, default=None, help="a real clip instead of the synthetic one")
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory(prefix="ffviz-recording-cost-") as tmp:
         folder = Path(tmp)
-        clip = folder / "shaky.mp4"
-        synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(n_frames=args.frames, seed=0)), clip)
-        print(f"synthetic clip: {args.frames} frames of 640x360; os.cpu_count() = {os.cpu_count()}, "
-              f"load average {os.getloadavg()[0]:.1f}")
+        if args.clip is not None:
+            from pipeline.video_io import count_frames
+
+            clip = args.clip
+            args.frames = count_frames(clip)
+            print(f"clip {clip}: {args.frames} frames; os.cpu_count() = {os.cpu_count()}, "
+                  f"load average {os.getloadavg()[0]:.1f}")
+        else:
+            clip = folder / "shaky.mp4"
+            synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(n_frames=args.frames, seed=0)), clip)
+            print(f"synthetic clip: {args.frames} frames of 640x360; os.cpu_count() = {os.cpu_count()}, "
+                  f"load average {os.getloadavg()[0]:.1f}")
         run_once(clip, folder, "none", None)  # warm-up: numba compilation, codec start-up
-        print("| mode | recording | wall s: min (runs) | overhead | recorder s (share of run) | .rrd MB per 100 frames |")
-        print("|---|---|---|---|---|---|")
+        print("| mode | recording | wall s: min (runs) | overhead | CPU s: min | recorder s (share of run) | "
+              ".rrd MB per frame |")
+        print("|---|---|---|---|---|---|---|")
         for mode in args.modes.split(","):
             repeats = args.repeats if mode != "full" else args.full_repeats
             wall: dict[str | None, list[float]] = {level: [] for level in LEVELS}
@@ -98,9 +114,10 @@ def main() -> None:
                 overhead = "-" if level is None else f"{fastest / base - 1:+.1%}"
                 own_seconds, run_seconds = max(inside[level], key=lambda pair: pair[0] / pair[1])  # the worst run
                 own = "-" if level is None else f"{own_seconds:.2f} ({own_seconds / run_seconds:.1%})"
-                size = "-" if level is None else f"{sizes[level] / 1e6 * 100 / args.frames:.1f}"
-                print(f"| {mode} | {level or 'no recording'} | {fastest:.1f} ({runs}) | {overhead} | {own} | {size} |",
-                      flush=True)
+                size = "-" if level is None else f"{sizes[level] / 1e6 / args.frames:.3f}"
+                cpu = min(CPU_SECONDS[mode, level])
+                print(f"| {mode} | {level or 'no recording'} | {fastest:.1f} ({runs}) | {overhead} | {cpu:.1f} | {own} "
+                      f"| {size} |", flush=True)
             share = max(own / run for own, run in inside["summary"])
             wall_overhead = min(wall["summary"]) / base - 1
             verdict = "within" if share <= SUMMARY_BUDGET else "OVER"

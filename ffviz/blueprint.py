@@ -211,6 +211,6 @@ def default_blueprint(traced: Sequence[int] = ()) -> rrb.Blueprint:
             active_tab=0,
         ),
         # Opens on frame 0, paused (without play_state the viewer starts on the last frame, playing).
-        rrb.TimePanel(state="expanded", timeline=ent.FRAME_TIMELINE, play_state="paused"),
+        rrb.TimePanel(state="collapsed", timeline=ent.FRAME_TIMELINE, play_state="paused"),
         collapse_panels=True,
     )

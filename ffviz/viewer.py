@@ -104,3 +104,54 @@ def serve(path: Path, *, web_port: int = 9090, grpc_port: int = 9876, native: bo
                 process.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 os.killpg(process.pid, signal.SIGKILL)
+
+
+class LiveViewer:
+    """A web viewer with no recording yet, serving on 127.0.0.1, for a run to stream into (`--view`).
+
+    ``url`` is what the page shows, ``grpc_url`` what the recorder connects to. ``wait()`` keeps it serving
+    until Ctrl-C; ``stop()`` ends it (and everything it started)."""
+
+    def __init__(self, *, web_port: int = 9090, grpc_port: int = 9876) -> None:
+        command = [rerun_executable(), "--web-viewer", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
+                   "--port", str(grpc_port)]
+        env = dict(os.environ)
+        env.setdefault("RERUN_ANALYTICS", "0")
+        self.process = subprocess.Popen(command, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.DEVNULL)
+        self.grpc_url = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+        self.url = f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp://127.0.0.1:{grpc_port}/proxy"
+        _wait_listening(grpc_port, self.process)
+
+    def wait(self) -> int:
+        try:
+            return self.process.wait()
+        except KeyboardInterrupt:
+            return 0
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            os.killpg(self.process.pid, signal.SIGTERM)
+            try:
+                self.process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.process.pid, signal.SIGKILL)
+
+
+def _wait_listening(port: int, process: subprocess.Popen, timeout_s: float = 30.0) -> None:
+    import socket
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        if process.poll() is not None:
+            raise InputError(f"the web viewer exited ({process.returncode}); is port {port} in use?")
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=1):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise InputError(f"the web viewer did not listen on 127.0.0.1:{port}") from None
+            time.sleep(0.2)

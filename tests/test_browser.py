@@ -22,6 +22,8 @@ import sys
 import time
 import urllib.parse
 import urllib.request
+from contextlib import contextmanager
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -29,6 +31,7 @@ import pytest
 
 from ffviz.recorder import RerunRecorder
 from pipeline import synthetic
+from pipeline.video_io import VideoReader
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 pytestmark = pytest.mark.slow
@@ -235,3 +238,151 @@ def test_the_web_viewer_renders_the_recording_in_chromium(recording, tmp_path):
 def decode_png(data: str) -> np.ndarray:
     image = cv2.imdecode(np.frombuffer(base64.b64decode(data), np.uint8), cv2.IMREAD_COLOR)
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+# -- a real clip's full recording, >= 250 frames: open on frame 0, step to the last ------------------------------
+
+REAL_CLIP = "vplab_C.avi"
+OPEN_TIMEOUT_S = 300  # the whole recording streams in and frame 0's video is decoded in software
+MATCH_SCORE = 0.7  # normalised cross-correlation of the frame with the best-matching screen region
+
+
+@contextmanager
+def web_viewer_page(rrd: Path, profile: Path):
+    """`ffviz view rrd` and headless Chromium on it: yields (DevTools session, page URL, navigation time)."""
+    browser = chromium()
+    web, grpc = free_port(), free_port()
+    env = dict(os.environ, RERUN_ANALYTICS="0")
+    viewer = subprocess.Popen([sys.executable, "-m", "ffviz.cli", "view", str(rrd), "--web-port", str(web),
+                               "--grpc-port", str(grpc)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                              env=env, start_new_session=True)
+    chrome = devtools = None
+    try:
+        url = re.search(r"http://\S+", viewer.stdout.readline()).group(0)
+        wait_http(f"http://127.0.0.1:{web}/", 30)
+        chrome = subprocess.Popen(
+            [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+             "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--remote-debugging-address=127.0.0.1",
+             "--remote-debugging-port=0", f"--window-size={WINDOW[0]},{WINDOW[1]}", "about:blank"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        port_file = profile / "DevToolsActivePort"
+        deadline = time.monotonic() + 60
+        while not (port_file.is_file() and port_file.read_text().strip()):
+            assert chrome.poll() is None and time.monotonic() < deadline, "chromium did not start its DevTools server"
+            time.sleep(0.3)
+        port = int(port_file.read_text().split()[0])
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as response:
+            page = next(t for t in json.load(response) if t["type"] == "page")
+        devtools = DevTools(page["webSocketDebuggerUrl"])
+        devtools.call("Page.enable")
+        devtools.call("Emulation.setDeviceMetricsOverride", width=WINDOW[0], height=WINDOW[1], deviceScaleFactor=1,
+                      mobile=False)
+        devtools.call("Page.navigate", url=url)
+        yield devtools, url, time.monotonic()
+    finally:
+        if devtools is not None:
+            devtools.close()
+        if chrome is not None:
+            stop(chrome)
+        stop(viewer)
+
+
+def screenshot(devtools: DevTools) -> np.ndarray:
+    return decode_png(devtools.call("Page.captureScreenshot", format="png")["data"])
+
+
+def match_score(screen: np.ndarray, frame: np.ndarray) -> float:
+    """How well ``frame``, at any scale from a quarter to 2.5x, matches a region of ``screen`` (best
+    normalised cross-correlation, grey levels; both halved first, for speed)."""
+    screen_grey = cv2.resize(cv2.cvtColor(screen, cv2.COLOR_RGB2GRAY), None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)
+    frame_grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)
+    best = -1.0
+    for scale in np.geomspace(0.125, 1.25, 48):
+        template = cv2.resize(frame_grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        if template.shape[0] > screen_grey.shape[0] or template.shape[1] > screen_grey.shape[1]:
+            continue
+        best = max(best, float(cv2.matchTemplate(screen_grey, template, cv2.TM_CCOEFF_NORMED).max()))
+    return best
+
+
+def press(devtools: DevTools, key: str, code: int) -> None:
+    for kind in ("rawKeyDown", "keyUp"):
+        devtools.call("Input.dispatchKeyEvent", type=kind, key=key, code=key, windowsVirtualKeyCode=code,
+                      nativeVirtualKeyCode=code)
+
+
+@pytest.fixture(scope="module")
+def real_recording(tmp_path_factory):
+    from tests.conftest import real_clip
+
+    clip = real_clip(REAL_CLIP)
+    with VideoReader(clip) as reader:
+        frames = [f.rgb for f in reader]
+    assert len(frames) >= 250
+    rrd = tmp_path_factory.mktemp("real") / "vplab_C.rrd"
+    stabilize(clip, None, StabilizeConfig(mode="full"), observer=RerunRecorder(rrd, level="full"))
+    return rrd, frames[0], frames[-1], len(frames)
+
+
+@pytest.mark.real_video
+def test_a_real_full_recording_opens_on_frame_0_and_steps_to_the_last(real_recording, tmp_path):
+    rrd, first, last, n_frames = real_recording
+    with web_viewer_page(rrd, tmp_path / "profile") as (devtools, url, navigated):
+        deadline = navigated + OPEN_TIMEOUT_S
+        scores = []
+        while True:
+            time.sleep(5)
+            shot = screenshot(devtools)
+            scores.append((round(match_score(shot, first), 3), round(match_score(shot, last), 3)))
+            if scores[-1][0] >= MATCH_SCORE or time.monotonic() > deadline:
+                break
+        opened_s = time.monotonic() - navigated
+        cv2.imwrite(str(tmp_path / "open.png"), cv2.cvtColor(shot, cv2.COLOR_RGB2BGR))
+        print(f"{n_frames}-frame recording ({rrd.stat().st_size / 1e6:.1f} MB): frame 0 on screen after {opened_s:.0f} s")
+        assert scores[-1][0] >= MATCH_SCORE, f"frame 0 not on screen (scores frame 0 / last: {scores}); {tmp_path}/open.png"
+        # Paused on frame 0: it stays.
+        time.sleep(5)
+        assert match_score(screenshot(devtools), first) >= MATCH_SCORE
+        # Step back from frame 0: the time line wraps round to the last frame.
+        devtools.call("Input.dispatchMouseEvent", type="mouseMoved", x=WINDOW[0] // 2, y=WINDOW[1] // 2)
+        press(devtools, "ArrowLeft", 37)
+        deadline = time.monotonic() + 120
+        while True:
+            time.sleep(3)
+            shot = screenshot(devtools)
+            on_last, on_first = match_score(shot, last), match_score(shot, first)
+            if (on_last >= MATCH_SCORE and on_last > on_first) or time.monotonic() > deadline:
+                break
+        cv2.imwrite(str(tmp_path / "last.png"), cv2.cvtColor(shot, cv2.COLOR_RGB2BGR))
+        assert on_last >= MATCH_SCORE and on_last > on_first, (
+            f"last frame not on screen after stepping (scores last / first: {on_last:.3f} / {on_first:.3f}); "
+            f"{tmp_path}/last.png")
+
+
+# -- ffviz snapshot: the native viewer, headless ----------------------------------------------------------------
+
+def test_snapshot_shows_the_asked_frame_on_the_asked_tab(tmp_path):
+    if shutil.which("ffmpeg") is None:
+        pytest.skip("the native viewer decodes H.264 with the ffmpeg executable (apt-get install ffmpeg)")
+    video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=12, seed=4, jitter_px=8.0))
+    clip = tmp_path / "clip.mp4"
+    synthetic.write_video(video, clip)
+    rrd = tmp_path / "clip.rrd"
+    stabilize(clip, None, StabilizeConfig(mode="none"), observer=RerunRecorder(rrd, level="full"))
+    with VideoReader(clip) as reader:
+        inputs = [f.rgb for f in reader]
+    env = dict(os.environ, RERUN_ANALYTICS="0")
+    shots = {}
+    for frame, tab in ((9, "overview"), (2, "about")):
+        png = tmp_path / f"{tab}-{frame}.png"
+        subprocess.run([sys.executable, "-m", "ffviz.cli", "snapshot", str(rrd), "--frame", str(frame), "--tab", tab,
+                        "-o", str(png)], check=True, env=env, capture_output=True, timeout=300)
+        shots[tab] = cv2.cvtColor(cv2.imread(str(png)), cv2.COLOR_BGR2RGB)
+    overview = shots["overview"]
+    assert match_score(overview, inputs[9]) >= MATCH_SCORE
+    assert match_score(overview, inputs[9]) > match_score(overview, inputs[0])
+    assert match_score(shots["about"], inputs[2]) < MATCH_SCORE  # the about tab shows text, not frames
+    result = subprocess.run([sys.executable, "-m", "ffviz.cli", "snapshot", str(rrd), "--tab", "nope", "-o",
+                             str(tmp_path / "x.png")], env=env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "overview" in result.stderr

@@ -12,7 +12,7 @@ import rerun as rr
 
 import ffviz
 from ffviz import entities as ent, trace, visual
-from ffviz.recorder import FILLED_BY_BASE, RerunRecorder
+from ffviz.recorder import FILLED_BY_BASE, WEIGHTS_STEP, RerunRecorder
 from ffviz.rrd import Recording
 from ffviz.viewer import rerun_executable
 from pipeline import geometry, synthetic
@@ -394,7 +394,9 @@ def test_masks_are_exact_and_maps_within_half_a_step(compact_run):
     deblurred = by_frame(collector, "deblur")
     sharpened = [t for t in sorted(deblurred) if deblurred[t].neighbours]
     if sharpened:
-        assert_weights(recording.image(ent.DEBLUR_WEIGHTS, sharpened[0]), deblurred[sharpened[0]].weights)
+        recorded = recording.image(ent.DEBLUR_WEIGHTS, sharpened[0]) / ent.DEBLUR_WEIGHTS_SCALE
+        np.testing.assert_allclose(recorded, deblurred[sharpened[0]].weights,
+                                   atol=(WEIGHTS_STEP / 2 + 0.5) / ent.DEBLUR_WEIGHTS_SCALE + 1e-6)
 
 
 def test_every_colour_mapped_entity_has_a_colour_key(compact_run, full_run):
@@ -451,3 +453,46 @@ def test_about_tab_is_a_readable_summary(compact_run):
     assert "## Settings" in meta and "**smoothing**" in meta
     assert f"- warnings: {len(collector.warnings)}" in meta
     assert "frames in" in meta and "render pass" in meta
+
+
+def test_live_view_and_file_at_once(clip, tmp_path):
+    """--view: the recorder streams to a running viewer and writes the .rrd; here the viewer is the native one,
+    headless, so that what it received can be asked over its control API."""
+    import signal
+    import socket
+    import time
+
+    from rerun.experimental import ViewerClient
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    viewer = subprocess.Popen([rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port)],
+                              env=dict(os.environ, RERUN_ANALYTICS="0"), stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        url = f"rerun+http://127.0.0.1:{port}/proxy"
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                client = ViewerClient.connect(url)
+                client.get_state()
+                break
+            except Exception:
+                assert time.monotonic() < deadline, "headless viewer did not start"
+                time.sleep(0.3)
+        rrd = tmp_path / "live.rrd"
+        stabilize(clip, None, StabilizeConfig(mode="none"),
+                  observer=RerunRecorder(rrd, level="summary", live_url=url))
+        assert Recording.load(rrd).indices(ent.OUTPUT_FRAME) == list(range(N_FRAMES))
+        deadline = time.monotonic() + 30
+        while True:
+            state = client.get_state()
+            ends = [t.end for r in state.recordings for t in r.timelines if t.name == ent.FRAME_TIMELINE]
+            if ends == [N_FRAMES - 1] or time.monotonic() > deadline:
+                break
+            time.sleep(0.5)
+        assert ends == [N_FRAMES - 1], state
+    finally:
+        os.killpg(viewer.pid, signal.SIGTERM)
+        viewer.wait(timeout=15)

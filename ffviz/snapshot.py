@@ -1,0 +1,130 @@
+"""`ffviz snapshot`: a picture of what the viewer shows for a recording at a frame, on a tab, rendered headless.
+
+The native viewer runs without a window (`rerun --headless`, software Vulkan on these machines) with the
+recording and a blueprint file (.rbl) that is the recording's own layout with the asked tab active; it is
+driven over its control API (rerun.experimental.ViewerClient): wait for the load, move the time cursor, then
+take screenshots until two in a row are the same (the video frames have been decoded and drawn).
+The native viewer decodes H.264 frame streams with the `ffmpeg` executable: it must be on PATH.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+from ffviz import entities as ent
+from ffviz.blueprint import TAB_ORDER, default_blueprint
+from ffviz.viewer import check_recording, rerun_executable
+from pipeline.errors import ConfigError, InputError
+
+DEFAULT_SIZE = (1280, 800)  # logical points; the PNG is at the viewer's pixel scale
+APPLICATION_ID = "ffviz"
+
+
+def tab_index(name: str) -> int:
+    """The tab a name (or an unambiguous prefix of one, any case) means."""
+    wanted = name.strip().lower()
+    exact = [i for i, tab in enumerate(TAB_ORDER) if tab == wanted]
+    matches = exact or [i for i, tab in enumerate(TAB_ORDER) if tab.startswith(wanted)]
+    if len(matches) != 1:
+        raise ConfigError(f"--tab {name!r}: choose one of {', '.join(repr(t) for t in TAB_ORDER)}")
+    return matches[0]
+
+
+def traced_frames(recording: Path) -> list[int]:
+    """The frames the recording traced (their views are part of the layout)."""
+    from rerun.chunk import RrdReader
+
+    found = set()
+    for chunk in RrdReader(str(recording)).stream().to_chunks():
+        parts = str(chunk.entity_path).strip("/").split("/")
+        if len(parts) >= 2 and parts[0] == ent.TRACE and parts[1].isdigit():
+            found.add(int(parts[1]))
+    return sorted(found)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overview",
+             size: tuple[int, int] = DEFAULT_SIZE, timeout_s: float = 120.0) -> Path:
+    """Render ``recording`` at ``frame`` on ``tab`` to the PNG ``output``; returns ``output``."""
+    from rerun.experimental import ViewerClient
+
+    check_recording(recording)
+    if frame < 0:
+        raise ConfigError(f"--frame must be 0 or more, not {frame}")
+    if output.suffix.lower() != ".png":
+        raise ConfigError(f"{output}: the snapshot is a PNG; name it .png")
+    if shutil.which("ffmpeg") is None:
+        print("ffviz: warning: no `ffmpeg` on PATH: the native viewer cannot decode the recording's H.264 frame "
+              "streams (Debian: apt-get install ffmpeg); they will show an error", flush=True)
+    index = tab_index(tab)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="ffviz-snapshot-") as folder:
+        layout = default_blueprint(traced_frames(recording))
+        layout.root_container.active_tab = index
+        rbl = Path(folder) / "layout.rbl"
+        layout.save(APPLICATION_ID, str(rbl))
+        port = _free_port()
+        env = dict(os.environ, RERUN_ANALYTICS="0")
+        viewer = subprocess.Popen(
+            [rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port), "--window-size",
+             f"{size[0]}x{size[1]}", str(recording), str(rbl)],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        try:
+            png = _drive(ViewerClient, port, viewer, frame, time.monotonic() + timeout_s)
+        finally:
+            if viewer.poll() is None:
+                os.killpg(viewer.pid, signal.SIGTERM)
+                try:
+                    viewer.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    os.killpg(viewer.pid, signal.SIGKILL)
+    output.write_bytes(png)
+    return output
+
+
+def _drive(client_type, port: int, viewer: subprocess.Popen, frame: int, deadline: float) -> bytes:
+    client = None
+    while client is None:
+        if viewer.poll() is not None:
+            raise InputError(f"the headless viewer exited ({viewer.returncode}) before it could be driven")
+        try:
+            client = client_type.connect(f"rerun+http://127.0.0.1:{port}/proxy")
+            state = client.get_state()
+        except Exception:  # noqa: BLE001 - not listening yet
+            client = None
+            if time.monotonic() > deadline:
+                raise InputError("the headless viewer did not answer") from None
+            time.sleep(0.3)
+    while state.loading or not state.recordings or not any(
+            t.name == ent.FRAME_TIMELINE for r in state.recordings for t in r.timelines):
+        if time.monotonic() > deadline:
+            raise InputError("the headless viewer did not finish loading the recording")
+        time.sleep(0.3)
+        state = client.get_state()
+    last = max((t.end for r in state.recordings for t in r.timelines if t.name == ent.FRAME_TIMELINE), default=0)
+    if frame > last:
+        raise ConfigError(f"--frame {frame}: the recording's frames are 0 to {last}")
+    client.set_time(ent.FRAME_TIMELINE, sequence=frame, play_state="paused")
+    previous, shot = None, None
+    time.sleep(1.0)
+    while time.monotonic() < deadline:
+        shot = client.take_screenshot()
+        if shot == previous:
+            return shot
+        previous = shot
+        time.sleep(1.0)
+    if shot is None:
+        raise InputError("no screenshot from the headless viewer")
+    return shot
