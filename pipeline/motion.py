@@ -28,7 +28,8 @@ Refinement = Literal["none", "ecc"]
 RANSAC_SEED = 0x5EED
 # A second motion is looked for among RANSAC's outliers when they are at least this share of the tracks ...
 ALTERNATIVE_MIN_SHARE = 0.15
-ALTERNATIVE_MIN_SHIFT_PX = 2.0  # ... and kept when it moves the frame this much differently (working px)
+ALTERNATIVE_MIN_SHIFT_PX = 6.0  # ... and kept when it moves the frame this much differently (working px): less is
+# depth (parallax between near and far layers of a walk), which the camera path must not jump between
 ALTERNATIVE_PRIOR_PX = 2.0  # the alternative must continue the camera path this much better to be taken
 MOTION_MODELS: tuple[str, ...] = ("affine", "similarity", "homography")
 REFINEMENTS: tuple[str, ...] = ("none", "ecc")
