@@ -34,6 +34,8 @@ Rejection (an addition to eq. 31)
     neighbours at b_t / b_t' ~ 4 still takes ~80% of a moving object's pixels from neighbours that show it
     elsewhere (a ghost), whatever alpha. So a neighbour's pixel whose E exceeds ``reject_error``, or lies within
     ``reject_grow_px`` of one that does (the object's interior can match by chance), gets no weight at all.
+    E compares colours only, so ``StructureGuard`` also refuses where the local structure disagrees (a person
+    dressed like the background), with the same growth.
 
 Choices, measured with ``benchmarks/deblur_psnr.py --sweep`` (640x360 clips over coffee, astronaut, chelsea x
 2 seeds, 24 blurred and 60 sharp frames; PSNR change on blurred frames, on the moving object's interior, and the
