@@ -19,15 +19,15 @@ TAB_NOTES = {
         "**How to read this recording.** The time line below is the frame number (`frame`): drag it or use the "
         "arrow keys, space plays. Left: the input; right: the stabilized, completed, deblurred output. Below: the "
         "camera path, original (warm colours) against smoothed (cool colours); the vertical line is the current "
-        "frame. Each tab after this one is a stage of the pipeline, in order; each has a colour key beside "
-        "every colour-mapped image. *stage stepping* follows a few frames through every stage (time line "
+        "frame. Each tab after this one is a stage of the pipeline, in order; masks are shown beside the frames, "
+        "and every colour-mapped image has a colour key beside it. *stage stepping* follows a few frames through every stage (time line "
         "`stage`); *about* summarises the run and lists its warnings."),
     "motion": ("**Motion estimation** (thesis ch. 3): corners tracked from frame t-1 to t (green inliers, red "
                "outliers), a robust fit of `curr_from_prev`; its shift, rotation and zoom per frame, inliers and "
                "the fit's residual."),
     "smoothing": ("**Motion smoothing** (eq. 18, `S_t = sum G(i-t) T_t^i`) and **warping** (eq. 19, "
-                  "`I'_t(p) = I_t(S_t p)`): the camera path original against smoothed; red in the stabilized "
-                  "frame is the area no input pixel covers (the crop window in yellow with `--mode crop`)."),
+                  "`I'_t(p) = I_t(S_t p)`): the camera path original against smoothed; the stabilized frame and, "
+                  "in red, the area no input pixel covers (the crop window in yellow with `--mode crop`)."),
     "mosaic": ("**Consistent mosaic** (eqs. 20-22): where the aligned neighbours agree (variance of eq. 20 "
                "below the threshold) the missing pixel takes their mean (eq. 21-22, green); where they disagree "
                "(red) it is left to motion inpainting."),
@@ -119,10 +119,11 @@ def smoothing_tab() -> rrb.Container:
             rrb.Vertical(_trajectory_view(("x",), "px"), _trajectory_view(("y",), "px"),
                          _trajectory_view(("angle",), "deg")),
             rrb.Vertical(
-                _image("stabilized (eq. 19): missing area in red, crop window in yellow", ent.STABILIZED_FRAME,
-                       ent.STABILIZED_MISSING, ent.CROP_WINDOW),
+                _image("stabilized (eq. 19); crop window in yellow (--mode crop)", ent.STABILIZED_FRAME,
+                       ent.CROP_WINDOW),
+                _image("missing area (red)", ent.STABILIZED_MISSING, ent.CROP_WINDOW),
                 _key("missing", "missing area"),
-                row_shares=[4, 1],
+                row_shares=[4, 4, 1],
             ),
         ),
         _note("smoothing"),
@@ -136,8 +137,7 @@ def mosaic_tab() -> rrb.Container:
         rrb.Horizontal(
             rrb.Vertical(_image("mosaic variance (eq. 20)", ent.COMPLETION_VARIANCE), _key("variance", "variance"),
                          row_shares=[4, 1]),
-            rrb.Vertical(_image("accepted (green) / rejected (red) by the mosaic", ent.STABILIZED_FRAME,
-                                ent.COMPLETION_ACCEPTED),
+            rrb.Vertical(_image("missing pixels accepted (green) / rejected (red) by the mosaic", ent.COMPLETION_ACCEPTED),
                          _key("accepted", "mosaic"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
@@ -162,8 +162,7 @@ def inpainting_tab() -> rrb.Container:
                          _key("fmm_arrival", "arrival time"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
-            _image("filled by (eq. 25): neighbour offset / mosaic / fallback", ent.COMPLETION_FRAME,
-                   ent.COMPLETION_FILLED_BY, ent.COMPLETION_FALLBACK),
+            _image("filled by (eq. 25): neighbour offset / mosaic / fallback", ent.COMPLETION_FILLED_BY),
             _image("completed", ent.COMPLETION_FRAME),
             rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by")),
             _note("local flow + motion inpainting"),
@@ -179,8 +178,7 @@ def deblur_tab() -> rrb.Container:
             _image("after deblurring (eq. 30)", ent.DEBLUR_AFTER),
             rrb.Vertical(_image("share from sharper neighbours (eqs. 30-31)", ent.DEBLUR_WEIGHTS),
                          _key("deblur_weights", "weights"), row_shares=[4, 1]),
-            rrb.Vertical(_image("main source per pixel; red: refused, other content", ent.DEBLUR_BEFORE,
-                                ent.DEBLUR_SOURCE),
+            rrb.Vertical(_image("main source per pixel; red: refused, other content", ent.DEBLUR_SOURCE),
                          _key("deblur_source", "source"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(

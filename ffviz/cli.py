@@ -133,7 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tab", default="overview", metavar="NAME",
                    help="tab to show: overview, motion, smoothing, mosaic, local flow + motion inpainting, "
                         "deblurring, stage stepping or about; a unique prefix is enough (default: %(default)s)")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="PNG", help="PNG file to write (required)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="PNG",
+                   help="image file to write, .png or .jpg (required)")
     p.add_argument("--size", default="1280x800", metavar="WxH",
                    help="viewer window size in points; the PNG may be at twice that (default: %(default)s)")
 

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 from matplotlib.figure import Figure
 
-from ffviz import entities as ent
+from ffviz import entities as ent, visual
 from ffviz.rrd import Recording
 from pipeline.errors import InputError
 
@@ -133,8 +133,11 @@ def trajectories(recording: Recording, requested: Sequence[int] | None = None) -
     for ax, axis in zip(axes, ent.TRAJECTORY_AXES):
         frames, original = _series(recording, f"{ent.TRAJECTORY_ORIGINAL}/{axis}")
         smoothed_frames, smoothed = _series(recording, f"{ent.TRAJECTORY_SMOOTHED}/{axis}")
-        ax.plot(frames, original, color="#e65a3c", linewidth=1.0, label="original")
-        ax.plot(smoothed_frames, smoothed, color="#2878e6", linewidth=1.6, label="smoothed")
+        # The viewer's colours (visual.TRAJECTORY_COLOURS): original warm, smoothed cool.
+        ax.plot(frames, original, color=visual.hex_colour(visual.TRAJECTORY_COLOURS["original", axis]), linewidth=1.0,
+                label="original")
+        ax.plot(smoothed_frames, smoothed, color=visual.hex_colour(visual.TRAJECTORY_COLOURS["smoothed", axis]),
+                linewidth=1.6, label="smoothed")
         ax.set_ylabel(units[axis])
         ax.grid(alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
@@ -243,8 +246,7 @@ def mosaic_variance(recording: Recording, requested: Sequence[int] | None = None
                  layout="constrained")
     axes = fig.subplots(len(frames), 2, squeeze=False)
     variances = [recording.map(ent.COMPLETION_VARIANCE, t) for t in frames]
-    finite = np.concatenate([v[np.isfinite(v)] for v in variances])
-    vmax = float(np.percentile(finite, 99)) if finite.size else 1.0
+    vmax = visual.VARIANCE_RANGE[1]  # the viewer's colour bar (keys/variance): turbo, 0 to 400 intensity^2
     for r, (t, variance) in enumerate(zip(frames, variances)):
         stabilized = recording.image(ent.STABILIZED_FRAME, t)
         axes[r, 0].imshow(stabilized)
@@ -256,7 +258,7 @@ def mosaic_variance(recording: Recording, requested: Sequence[int] | None = None
             ax.set_yticks([])
     axes[0, 0].set_title("2D stabilized", fontsize=9)
     axes[0, 1].set_title("mosaic variance v_t (eq. 20)", fontsize=9)
-    fig.colorbar(shown, ax=axes[:, 1].tolist(), shrink=0.8, label="intensity variance")
+    fig.colorbar(shown, ax=axes[:, 1].tolist(), shrink=0.8, label="intensity^2 (0-255 scale)")
     fig.suptitle("Consistent mosaicing: variance of the neighbours over the missing area")
     return fig
 

@@ -6,7 +6,6 @@ Any timeline can index a query (``frame`` by default; ``stage`` and ``fmm_step``
 from __future__ import annotations
 
 from collections import defaultdict
-import io
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -121,10 +120,19 @@ class Recording:
         data = _blob(batch.column(column), row)
         if column == "EncodedDepthImage:blob":
             return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-        if column == "EncodedImage:blob" and data[:4].tobytes() == b"\x89PNG" and data[25] == 3:
-            from PIL import Image as PILImage  # a paletted PNG is a class map: its indices are the classes
-
-            return np.asarray(PILImage.open(io.BytesIO(data.tobytes())))
+        if column == "EncodedImage:blob" and data[:4].tobytes() == b"\x89PNG" and data[25] == 6:
+            legend = self.annotation_colours(entity)
+            if legend:  # an RGBA class map (ffviz.recorder.palette_png): colours back to classes
+                bgra = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+                rgba = bgra[..., [2, 1, 0, 3]].astype(np.uint32)
+                packed = (rgba[..., 0] << 24) | (rgba[..., 1] << 16) | (rgba[..., 2] << 8) | rgba[..., 3]
+                colours = np.array(sorted(legend), np.uint32)
+                position = np.searchsorted(colours, packed)
+                position = np.minimum(position, len(colours) - 1)
+                if not (colours[position] == packed).all():
+                    raise ValueError(f"{entity} {timeline}={index}: a colour outside the entity's legend")
+                ids = np.array([legend[c] for c in colours], np.uint8)
+                return ids[position]
         if column == "EncodedImage:blob":
             image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
             if image is None:
@@ -139,6 +147,17 @@ class Recording:
         if model in (ColorModel.BGR, ColorModel.BGRA):
             image = image[..., [2, 1, 0, 3][:channels]]
         return image.copy()
+
+    def annotation_colours(self, entity: str) -> dict[int, int]:
+        """{packed RGBA colour: class id} of the AnnotationContext logged at ``entity`` (0xRRGGBBAA)."""
+        out: dict[int, int] = {}
+        for batch in self.batches.get(entity, []):
+            if "AnnotationContext:context" in batch.schema.names:
+                for value in batch.column("AnnotationContext:context").to_pylist():
+                    for entry in (value[0] if value and isinstance(value[0], list) else value or []):
+                        info = entry["class_description"]["info"]
+                        out[int(info["color"] or 0)] = int(entry["class_id"])
+        return out
 
     def map(self, entity: str, index: int, timeline: str = ent.FRAME_TIMELINE) -> np.ndarray:
         """A float map in its units (NaN = no value), whether stored as 16-bit PNG (entities.MAP_STEPS) or float."""

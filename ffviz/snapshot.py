@@ -57,14 +57,14 @@ def _free_port() -> int:
 
 def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overview",
              size: tuple[int, int] = DEFAULT_SIZE, timeout_s: float = 120.0) -> Path:
-    """Render ``recording`` at ``frame`` on ``tab`` to the PNG ``output``; returns ``output``."""
+    """Render ``recording`` at ``frame`` on ``tab`` to ``output`` (.png, or .jpg); returns ``output``."""
     from rerun.experimental import ViewerClient
 
     check_recording(recording)
     if frame < 0:
         raise ConfigError(f"--frame must be 0 or more, not {frame}")
-    if output.suffix.lower() != ".png":
-        raise ConfigError(f"{output}: the snapshot is a PNG; name it .png")
+    if output.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise ConfigError(f"{output}: the snapshot is a PNG or a JPEG; name it .png or .jpg")
     if shutil.which("ffmpeg") is None:
         print("ffviz: warning: no `ffmpeg` on PATH: the native viewer cannot decode the recording's H.264 frame "
               "streams (Debian: apt-get install ffmpeg); they will show an error", flush=True)
@@ -90,7 +90,14 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
                     viewer.wait(timeout=10)
                 except subprocess.TimeoutExpired:
                     os.killpg(viewer.pid, signal.SIGKILL)
-    output.write_bytes(png)
+    if output.suffix.lower() == ".png":
+        output.write_bytes(png)
+    else:  # JPEG, for docs: a fifth of the PNG's bytes
+        import cv2
+        import numpy as np
+
+        image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+        cv2.imwrite(str(output), image, [cv2.IMWRITE_JPEG_QUALITY, 88])
     return output
 
 

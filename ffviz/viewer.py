@@ -155,3 +155,15 @@ def _wait_listening(port: int, process: subprocess.Popen, timeout_s: float = 30.
             if time.monotonic() > deadline:
                 raise InputError(f"the web viewer did not listen on 127.0.0.1:{port}") from None
             time.sleep(0.2)
+
+
+def notebook_live(*, web_port: int = 9090, grpc_port: int = 9876, width: int = 1100, height: int = 700):
+    """Jupyter: a viewer server on 127.0.0.1 and rerun's notebook widget reading from it; returns (live, widget).
+
+    Record with ``RerunRecorder(path, live_url=live.grpc_url)``: the run shows in the widget while it runs and
+    is saved to ``path`` (both sinks at once). Needs the `rerun-notebook` package (pip install -e ".[notebook]").
+    Show the widget as a cell's last expression (or ``widget.display()``); ``live.stop()`` when done."""
+    from rerun.notebook import Viewer
+
+    live = LiveViewer(web_port=web_port, grpc_port=grpc_port)
+    return live, Viewer(url=live.grpc_url, width=width, height=height)

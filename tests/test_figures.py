@@ -124,3 +124,19 @@ def test_a_file_that_is_not_a_recording_is_one_line_error(tmp_path, capsys):
     assert cli.main(["figures", str(bogus), "--output-dir", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a Rerun recording" in err[0]
+
+
+def test_figures_use_the_viewers_colours(full_recording):
+    """Trajectories in the recorder's line colours; the variance map on the viewer's colour bar (turbo, 0-400)."""
+    from matplotlib.colors import to_hex
+
+    from ffviz import visual
+
+    recording = Recording.load(full_recording[0])
+    fig = figures.trajectories(recording)
+    for ax, axis in zip(fig.axes, ("x", "y", "angle")):
+        colours = [to_hex(line.get_color()) for line in ax.get_lines()]
+        assert colours == [visual.hex_colour(visual.TRAJECTORY_COLOURS[kind, axis]) for kind in ("original", "smoothed")]
+    fig = figures.mosaic_variance(recording)
+    images = [im for ax in fig.axes for im in ax.get_images() if im.get_cmap().name == "turbo"]
+    assert images and all(im.get_clim() == visual.VARIANCE_RANGE for im in images)

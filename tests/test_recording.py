@@ -496,3 +496,83 @@ def test_live_view_and_file_at_once(clip, tmp_path):
     finally:
         os.killpg(viewer.pid, signal.SIGTERM)
         viewer.wait(timeout=15)
+
+
+def test_every_chart_line_has_its_own_name_and_colour(compact_run):
+    _, recording, _ = compact_run
+    series = [f"{ent.MOTION_PARAMS}/{name}" for name in ent.MOTION_PARAM_NAMES]
+    series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
+    series += [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)
+               for axis in ent.TRAJECTORY_AXES]
+    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback")]
+    series += [ent.DEBLUR_BLURRINESS, ent.DEBLUR_NEIGHBOURS, ent.DEBLUR_REFUSED]
+    styles = {}
+    for entity in series:
+        names = recording.texts(entity, "SeriesLines:names")
+        colours = [b.column("SeriesLines:colors").to_pylist()[0][0] for b in recording.batches[entity]
+                   if "SeriesLines:colors" in b.schema.names]
+        assert names and colours, f"{entity}: no SeriesLines style"
+        styles[entity] = (names[0], colours[0])
+    # Lines drawn in one chart never share a colour.
+    charts = [[f"{ent.COMPLETION_STATS}/{n}" for n in ("missing", "mosaic", "local_warp", "fallback")],
+              [f"{ent.MOTION_PARAMS}/{n}" for n in ent.MOTION_PARAM_NAMES],
+              [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED) for axis in ("x", "y")],
+              [f"{root}/angle" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)]]
+    for chart in charts:
+        assert len({styles[e][1] for e in chart}) == len(chart), chart
+        assert len({styles[e][0] for e in chart}) == len(chart), chart
+
+
+def test_class_colours_are_distinct_so_masks_read_back_exactly():
+    from ffviz import recorder
+
+    for legend in (recorder.MISSING_LEGEND, recorder.ACCEPTED_LEGEND, recorder.FALLBACK_LEGEND,
+                   RerunRecorder._filled_by_legend(), RerunRecorder._deblur_source_legend()):
+        colours = [tuple(c) + ((255,) if len(c) == 3 else ()) for _, _, c in legend]
+        assert len(set(colours)) == len(colours)
+
+
+def test_notebook_recipe_streams_the_run_to_the_widgets_source(clip, tmp_path):
+    """docs/recording.md's notebook recipe: the widget reads the live server's URL; a viewer reading that URL
+    (here the native one, headless, as the widget would in a browser) gets every frame; the .rrd is written too."""
+    pytest.importorskip("rerun_notebook", reason="pip install -e '.[notebook]'")
+    import signal
+    import socket
+    import time
+
+    from rerun.experimental import ViewerClient
+
+    from ffviz.viewer import notebook_live
+
+    ports = []
+    for _ in range(3):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            ports.append(s.getsockname()[1])
+    live, widget = notebook_live(web_port=ports[0], grpc_port=ports[1])
+    reader = None
+    try:
+        assert widget._viewer._url == live.grpc_url
+        rrd = tmp_path / "notebook.rrd"
+        stabilize(clip, None, StabilizeConfig(mode="none"),
+                  observer=RerunRecorder(rrd, level="summary", live_url=live.grpc_url))
+        assert Recording.load(rrd).indices(ent.OUTPUT_FRAME) == list(range(N_FRAMES))
+        reader = subprocess.Popen([rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(ports[2]),
+                                   live.grpc_url], env=dict(os.environ, RERUN_ANALYTICS="0"),
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        deadline, ends = time.monotonic() + 60, []
+        while time.monotonic() < deadline:
+            try:
+                state = ViewerClient.connect(f"rerun+http://127.0.0.1:{ports[2]}/proxy").get_state()
+                ends = [t.end for r in state.recordings for t in r.timelines if t.name == ent.FRAME_TIMELINE]
+            except Exception:
+                ends = []
+            if ends == [N_FRAMES - 1]:
+                break
+            time.sleep(0.5)
+        assert ends == [N_FRAMES - 1]
+    finally:
+        live.stop()
+        if reader is not None:
+            os.killpg(reader.pid, signal.SIGTERM)
+            reader.wait(timeout=15)
