@@ -221,9 +221,10 @@ def test_full_mode_records_every_completion_intermediate(shaky, tmp_path):
                    ent.COMPLETION_FALLBACK, f"{ent.COMPLETION_STATS}/missing"):
         assert recording.rows(entity) == n, entity
         assert recording.timelines(entity) == {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}
-    with_fills = sum(1 for _, result in collector.results["completion"] if result.fills)
+    # Every frame logs the first fill's maps, or clears them (no stale map from an earlier frame): n rows each.
+    assert any(result.fills for _, result in collector.results["completion"])
     for entity in (ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FMM_ORDER, ent.COMPLETION_FMM_ARRIVAL):
-        assert recording.rows(entity) == with_fills, entity
+        assert recording.rows(entity) == n, entity
     # The logged fractions are the pipeline's.
     _, missing = recording.scalars(f"{ent.COMPLETION_STATS}/missing")
     np.testing.assert_allclose(missing, [r.missing.mean() for _, r in collector.results["completion"]], atol=1e-12)
