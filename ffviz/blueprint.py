@@ -66,9 +66,9 @@ def _traced_views(traced: Sequence[int], title: Callable[[int], str],
 
 
 def _stage_stepping_tab(traced: Sequence[int]) -> rrb.Container:
-    stages = _traced_views(traced, lambda t: f"frame {t}: input -> output (time line 'stage')",
+    stages = _traced_views(traced, lambda t: f"frame {t}: stages (time line stage)",
                            lambda t: [ent.trace_image(t), ent.trace_label(t)])
-    fmm = _traced_views(traced, lambda t: f"frame {t}: Fast Marching band (time line 'fmm_step')",
+    fmm = _traced_views(traced, lambda t: f"frame {t}: FMM band (time line fmm_step)",
                         lambda t: [ent.trace_fmm(t), ent.trace_fmm_label(t)])
     if not stages:
         return rrb.Vertical(rrb.TextDocumentView(name="no traced frames (ffviz stabilize --frames T1,T2)",
@@ -154,7 +154,7 @@ def mosaic_tab() -> rrb.Container:
 def inpainting_tab() -> rrb.Container:
     return rrb.Vertical(
         rrb.Horizontal(
-            rrb.Vertical(_image("local flow (eq. 23), motion-inpainted (eq. 24); first neighbour",
+            rrb.Vertical(_image("local flow, 1st neighbour (eqs. 23-24)",
                                 ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS), row_shares=[1]),
             rrb.Vertical(_image("Fast Marching visiting order", ent.COMPLETION_FMM_ORDER),
                          _key("fmm_order", "visiting order"), row_shares=[4, 1]),
@@ -162,7 +162,7 @@ def inpainting_tab() -> rrb.Container:
                          _key("fmm_arrival", "arrival time"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
-            _image("filled by (eq. 25): neighbour offset / mosaic / fallback", ent.COMPLETION_FILLED_BY),
+            _image("filled by (eq. 25)", ent.COMPLETION_FILLED_BY),
             _image("completed", ent.COMPLETION_FRAME),
             rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by")),
             _note("local flow + motion inpainting"),
@@ -174,11 +174,11 @@ def inpainting_tab() -> rrb.Container:
 def deblur_tab() -> rrb.Container:
     return rrb.Vertical(
         rrb.Horizontal(
-            _image("before deblurring (sharpened frames only)", ent.DEBLUR_BEFORE),
-            _image("after deblurring (eq. 30)", ent.DEBLUR_AFTER),
-            rrb.Vertical(_image("share from sharper neighbours (eqs. 30-31)", ent.DEBLUR_WEIGHTS),
+            _image("before (sharpened frames only)", ent.DEBLUR_BEFORE),
+            _image("after (eq. 30)", ent.DEBLUR_AFTER),
+            rrb.Vertical(_image("weights (eqs. 30-31)", ent.DEBLUR_WEIGHTS),
                          _key("deblur_weights", "weights"), row_shares=[4, 1]),
-            rrb.Vertical(_image("main source per pixel; red: refused, other content", ent.DEBLUR_SOURCE),
+            rrb.Vertical(_image("source per pixel (red: refused)", ent.DEBLUR_SOURCE),
                          _key("deblur_source", "source"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(

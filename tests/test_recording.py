@@ -246,7 +246,7 @@ def test_summary_level_keeps_series_and_output_and_traces_only_when_asked(clip, 
     # The default blueprint is embedded, with a view of the traced frame.
     printed = subprocess.run([rerun_executable(), "rrd", "print", "-vvv", str(asked)], capture_output=True, text=True,
                              env=dict(os.environ, RERUN_ANALYTICS="0"), check=True).stdout
-    assert "Blueprint" in printed and "frame 7: input -> output" in printed
+    assert "Blueprint" in printed and "frame 7: stages (time line stage)" in printed
 
 
 def test_default_traced_frames_are_spread_and_have_missing_area():
