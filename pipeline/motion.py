@@ -18,7 +18,6 @@ from typing import Literal
 
 import cv2
 import numpy as np
-import scipy.spatial
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
@@ -320,6 +319,8 @@ def choose_background(estimate: MotionEstimate, previous: MotionEstimate | None,
         object_ends = previous.alternative_curr_points
         ends = np.concatenate([background_ends, object_ends])
         is_background = np.r_[np.ones(len(background_ends), bool), np.zeros(len(object_ends), bool)]
+        import scipy.spatial  # here: only pairs holding two motions need it
+
         tree = scipy.spatial.cKDTree(ends)
         kept = is_background[tree.query(kept_points, k=1)[1]].mean()
         other = is_background[tree.query(estimate.alternative_prev_points, k=1)[1]].mean()
