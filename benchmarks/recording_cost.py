@@ -4,9 +4,9 @@ the .rrd's size per 100 frames, on a synthetic 640x360 clip (pipeline.synthetic)
 Each configuration runs the whole library call (both passes, the output video written), interleaved
 (none, summary, full, none, ...) so that load on a shared machine spreads over all of them. Columns: wall
 seconds (the minimum over the runs, the estimate least disturbed by other jobs, and every run), the overhead
-of that minimum against no recording, and the recorder's own time: seconds spent inside the recorder's
-observer calls on the pipeline's thread (closing included, which waits for the SDK's writer thread to
-finish), and its share of the run. On a loaded machine the wall-clock overhead swings by +-20 % from run to
+of that minimum against no recording, CPU seconds of the process (all threads), and the recorder's time on
+the pipeline's thread: seconds spent inside its observer calls (handing results to its own thread, waiting
+when that one is behind, and closing, which waits for it and the SDK's writer), and its share of the run. On a loaded machine the wall-clock overhead swings by +-20 % from run to
 run; the recorder's own time does not. Summary recording should add at most 15 % (issue 5).
 Usage: python benchmarks/recording_cost.py [--frames 100] [--repeats 3] [--full-repeats 2] [--modes none,full]
        [--clip ../shared/videos/vplab_C.avi]  (a real clip instead of the synthetic one)

@@ -11,13 +11,14 @@ are also logged stage by stage on the ``stage`` timeline and their Fast Marching
 from __future__ import annotations
 
 import os
+import queue
 import tempfile
+import threading
+import time
 import uuid
+from fractions import Fraction
 from pathlib import Path
 from typing import Any, Literal, Sequence
-
-import time
-from fractions import Fraction
 
 import av
 import cv2
@@ -45,6 +46,8 @@ FILLED_BY_BASE = 100  # filled_by class of a local-warp pixel: FILLED_BY_BASE + 
 H264_OPTIONS = {"preset": "veryfast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
 KEYFRAME_INTERVAL = 30
 WEIGHTS_STEP = 4  # deblur/weights in the compact recording: multiples of 4/255 (--lossless: of 1/255)
+QUEUE_EVENTS = 48  # stage results waiting for the recorder's thread (~6 frames' worth): bounds the memory held
+_STOP = object()
 BATCHER = rr.ChunkBatcherConfig(flush_tick=2.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
 MISSING_LEGEND = [(0, "valid", (0, 0, 0, 0)), (MISSING_CLASS, "missing", (255, 0, 64, 160))]
 ACCEPTED_LEGEND = [(0, "known", (0, 0, 0, 0)), (1, "missing, rejected by the mosaic", (255, 0, 64, 160)),
@@ -167,11 +170,14 @@ class RerunRecorder:
     images (deblurring, flow, traced frames) JPEGs at this quality. Masks are lossless either way.
     ``trace_frames``: frames to follow through every stage; None: ``trace.DEFAULT_TRACED`` frames with missing
     area at level "full", none at "summary".
+    ``threaded``: encode and log on a thread of the recorder's own, in order, so that the pipeline's thread
+    only hands results over (H.264 and PNG encoding release the GIL); an error there surfaces at the next
+    call or at ``close()``.
     """
 
     def __init__(self, path: Path | str, *, level: RecordLevel = "full", jpeg_quality: int | None = 80,
                  trace_frames: Sequence[int] | None = None, application_id: str = "ffviz",
-                 live_url: str | None = None) -> None:
+                 live_url: str | None = None, threaded: bool = True) -> None:
         if level not in RECORD_LEVELS:
             raise ValueError(f"record level must be one of {', '.join(RECORD_LEVELS)}, not {level!r}")
         self.path = Path(path)
@@ -203,7 +209,44 @@ class RerunRecorder:
         self._warnings = 0
         self._started = time.perf_counter()
         self._cpu_started = time.process_time()
-        self.seconds_logging = 0.0  # wall time spent inside the recorder (encoding and logging)
+        self.seconds_logging = 0.0  # wall time the recorder spent encoding and logging (on its own thread)
+        self._error: BaseException | None = None
+        self._aborting = False
+        self._queue: queue.Queue | None = None
+        self._worker: threading.Thread | None = None
+        if threaded:
+            self._queue = queue.Queue(maxsize=QUEUE_EVENTS)
+            self._worker = threading.Thread(target=self._drain, name="ffviz-recorder", daemon=True)
+            self._worker.start()
+
+    # -- the recorder's thread --------------------------------------------------------------------
+
+    def _submit(self, call, *args) -> None:
+        if self._error is not None:
+            raise RuntimeError(f"recording to {self.path} failed: {self._error!r}") from self._error
+        if self._queue is None:
+            call(*args)
+        else:
+            self._queue.put((call, args))
+
+    def _drain(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is _STOP:
+                return
+            if self._error is not None or self._aborting:
+                continue
+            call, args = item
+            try:
+                call(*args)
+            except BaseException as error:  # noqa: BLE001 - handed to the pipeline's thread
+                self._error = error
+
+    def _stop_worker(self) -> None:
+        if self._worker is not None:
+            self._queue.put(_STOP)
+            self._worker.join()
+            self._worker = None
 
     @property
     def lossless(self) -> bool:
@@ -212,6 +255,9 @@ class RerunRecorder:
     # -- Observer ---------------------------------------------------------------------------------
 
     def on_start(self, info: Any, config: Any) -> None:
+        self._submit(self._do_start, info, config)
+
+    def _do_start(self, info: Any, config: Any) -> None:
         started = time.perf_counter()
         self._size = (info.width, info.height)
         self._info, self._config = info, config
@@ -297,18 +343,24 @@ class RerunRecorder:
     def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
         handler = getattr(self, f"_on_{stage}", None)
         if handler is not None:
-            started = time.perf_counter()
-            handler(stamp, result)
-            self.seconds_logging += time.perf_counter() - started
+            self._submit(self._do_stage, handler, stamp, result)
+
+    def _do_stage(self, handler, stamp: Stamp | None, result: Any) -> None:
+        started = time.perf_counter()
+        handler(stamp, result)
+        self.seconds_logging += time.perf_counter() - started
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:
+        self._submit(self._do_warning, stamp, message)
+
+    def _do_warning(self, stamp: Stamp | None, message: str) -> None:
         self._warnings += 1
         if stamp is not None:
             self._set_time(stamp)
         self.rec.log(ent.LOG, rr.TextLog(message, level=rr.TextLogLevel.WARN), static=stamp is None)
 
     def on_finish(self, report: Any) -> None:
-        self._log_meta(report)
+        self._submit(self._log_meta, report)
         self.close()
 
     # -- stages -----------------------------------------------------------------------------------
@@ -604,8 +656,8 @@ class RerunRecorder:
         if report is not None:
             seconds = float(getattr(report, "seconds_motion", 0.0)) + float(getattr(report, "seconds_render", 0.0))
             lines.append(f"- {report.n_frames} frames in {seconds:.1f} s (motion pass "
-                         f"{report.seconds_motion:.1f} s, render pass {report.seconds_render:.1f} s; recording "
-                         f"{seconds_logging:.1f} s of it)")
+                         f"{report.seconds_motion:.1f} s, render pass {report.seconds_render:.1f} s; the recorder, on "
+                         f"its own thread, was busy {seconds_logging:.1f} s)")
             if getattr(report, "cuts", None):
                 lines.append(f"- scene cuts at frames {', '.join(map(str, report.cuts))}")
         else:
@@ -617,6 +669,10 @@ class RerunRecorder:
         """Finish the file and move it into place."""
         if self._closed:
             return
+        self._stop_worker()
+        if self._error is not None:
+            self.abort()
+            raise RuntimeError(f"recording to {self.path} failed: {self._error!r}") from self._error
         self._closed = True
         self._send_blueprint()
         for track in self._tracks.values():
@@ -632,6 +688,8 @@ class RerunRecorder:
         """Drop the recording: nothing half-written is left behind."""
         if self._closed:
             return
+        self._aborting = True  # what is still queued is skipped
+        self._stop_worker()
         self._closed = True
         self.rec.disconnect()
         self._tmp_path.unlink(missing_ok=True)

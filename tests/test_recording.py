@@ -576,3 +576,17 @@ def test_notebook_recipe_streams_the_run_to_the_widgets_source(clip, tmp_path):
         if reader is not None:
             os.killpg(reader.pid, signal.SIGTERM)
             reader.wait(timeout=15)
+
+
+def test_an_error_on_the_recorders_thread_surfaces_and_leaves_no_file(clip, tmp_path, monkeypatch):
+    rrd = tmp_path / "broken.rrd"
+    recorder = RerunRecorder(rrd, level="summary")
+
+    def broken(stamp, rgb):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(recorder, "_on_output", broken)
+    with pytest.raises(RuntimeError, match="disk full"):
+        stabilize(clip, None, StabilizeConfig(mode="none"), observer=recorder)
+    recorder.abort()  # what the CLI does on any error
+    assert not rrd.exists() and not list(tmp_path.glob(".broken.*"))
