@@ -473,9 +473,9 @@ def blend(target: np.ndarray, rgbs: np.ndarray, masks: np.ndarray, mask_index: n
            alpha: np.float32) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eq. 30 row by row over every neighbour k: (I_t + sum_k w_k I_k) / (1 + sum_k w_k), with w_k of eq. 31 on
     the pixels in k's row span, in masks[mask_index[k]] (rows not exacts[k]) and not in rejecteds[k] (looked at
-    on the rows has_rejected[k] marks); E_k is the low-res errors[k] upsampled as cv2.resize INTER_LINEAR would. Returns the frame
-    (uint8, rounded), the share taken from neighbours 1 - 1 / (1 + sum w), and the number of pixels each
-    neighbour gave weight to.
+    on the rows has_rejected[k] marks); E_k is the low-res errors[k] upsampled as cv2.resize INTER_LINEAR would.
+    Returns the frame (uint8, rounded), the share taken from neighbours 1 - 1 / (1 + sum w), and the number of
+    pixels each neighbour gave weight to.
 
     A row's sums stay in cache while every neighbour adds to them. The loops run over colour samples (weights
     and sums repeated per sample) with unsigned indices and numpy's error model (no zero-division check), so
@@ -617,7 +617,8 @@ def structure_refusal(means: np.ndarray, target_mean: np.ndarray, target_var: np
                       agreement: np.ndarray, flat_var: np.float32, flat_difference: np.float32) -> np.ndarray:
     """StructureGuard's decision per cell from the window means of structure_products' terms: the contrast-
     structure term (2 cov + c) / (var_t + var_o + c) into ``agreement``; refused (uint8 1) where the window lies
-    wholly in the neighbour's coverage and the term is below ``minimum``, or, where both windows have structure
+    wholly in the neighbour's coverage and the term is below ``minimum``, or both windows are flat (variances
+    below ``flat_var``) with means more than ``flat_difference`` apart, or, where both windows have structure
     (variances >= ``min_var``) and lie ``edge`` cells from the image's edge, the neighbour moved one cell agrees
     better by more than ``margin``."""
     height, width = target_mean.shape

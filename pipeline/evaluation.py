@@ -48,8 +48,13 @@ class CompletionScores:
     frames: int = 0
 
     def psnr(self, method: str) -> float:
-        mse = self.squared_error[method] / max(self.pixels * 3, 1)
-        return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
+        return _pooled_psnr(self.squared_error[method], self.pixels)
+
+
+def _pooled_psnr(squared_error: float, pixels: int) -> float:
+    """PSNR (dB, 8-bit) of a sum of squared RGB errors over ``pixels`` pixels; inf when it is 0."""
+    mse = squared_error / max(pixels * 3, 1)
+    return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
 
 
 class _CompletionJudge(NullObserver):
@@ -77,11 +82,9 @@ class _CompletionJudge(NullObserver):
         judged = missing & covered
         if not judged.any():
             return
-        mosaic_only = completed.mosaic
         candidates = {
             "ours": completed.frame,
-            "mosaic+telea": cv2.inpaint(mosaic_only.frame, mosaic_only.remaining.astype(np.uint8), TELEA_RADIUS,
-                                        cv2.INPAINT_TELEA),
+            "mosaic+telea": mosaic_telea(completed),
             "telea": cv2.inpaint(warped.frame, missing.astype(np.uint8), TELEA_RADIUS, cv2.INPAINT_TELEA),
         }
         reference = truth[judged].astype(np.float64)
@@ -89,6 +92,12 @@ class _CompletionJudge(NullObserver):
             self.scores.squared_error[method] += float(np.sum((image[judged].astype(np.float64) - reference) ** 2))
         self.scores.pixels += int(judged.sum())
         self.scores.frames += 1
+
+
+def mosaic_telea(completed) -> np.ndarray:
+    """What OpenCV's CPU chain makes of the same frame: our consistent mosaic, then Telea for what it left."""
+    mosaic_only = completed.mosaic
+    return cv2.inpaint(mosaic_only.frame, mosaic_only.remaining.astype(np.uint8), TELEA_RADIUS, cv2.INPAINT_TELEA)
 
 
 def _run(frames: Sequence[np.ndarray], fps: float, truth_of: TruthOf, config: StabilizeConfig,
@@ -187,8 +196,7 @@ class _Pooled:
 
     @property
     def psnr(self) -> float:
-        mse = self.squared_error / max(self.pixels * 3, 1)
-        return float("nan") if self.pixels == 0 else (float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse)))
+        return float("nan") if self.pixels == 0 else _pooled_psnr(self.squared_error, self.pixels)
 
     @property
     def correlation(self) -> float:
@@ -271,10 +279,7 @@ class _DynamicJudge(NullObserver):
             self.show[name].add_correlation(_high_pass(image, sigma), hidden_high, inside)
         synthesized = completed.missing & covered
         if synthesized.any():
-            mosaic_only = completed.mosaic
-            telea = cv2.inpaint(mosaic_only.frame, mosaic_only.remaining.astype(np.uint8), TELEA_RADIUS,
-                                cv2.INPAINT_TELEA)
-            for name, image in (("ours", completed.frame), ("mosaic+telea", telea)):
+            for name, image in (("ours", completed.frame), ("mosaic+telea", mosaic_telea(completed))):
                 self.synthesized[name].add_error(image, truth, synthesized)
                 self.synthesized_on[name]["object"].add_error(image, truth, synthesized & inside)
                 self.synthesized_on[name]["background"].add_error(image, truth, synthesized & ~inside)

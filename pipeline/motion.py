@@ -299,8 +299,8 @@ def choose_background(estimate: MotionEstimate, previous: MotionEstimate | None,
     """The camera's motion between the two motions a pair holds (RANSAC keeps the one most tracks agree on,
     which is a large textured object's once it holds more tracks than the background).
 
-    With no pair before (the first pair, or after a failed one), by spread: see _spread's caller. Where the pair
-    before also held two motions, by place: this pair's tracks start in the frame the pair before
+    With no pair before (the first pair, or after a failed one), by spread: the background surrounds what moves
+    in front of it, so its tracks spread wider. Where the pair before also held two motions, by place: this pair's tracks start in the frame the pair before
     ended in, so each of its tracks is labelled by the nearest track end of the pair before (background or
     object); the motion whose tracks lie mostly in the background's places is the camera's. An object moves
     10-25 px a frame, far less than its own size, so the places carry over. Otherwise by continuity: the motion
@@ -311,8 +311,7 @@ def choose_background(estimate: MotionEstimate, previous: MotionEstimate | None,
     swap = False
     kept_points = estimate.prev_points[estimate.inliers]
     if previous is None or previous.status != "ok":
-        # Nothing before to go by: the background surrounds what moves in front of it, so its tracks spread
-        # wider (a robust bounding box) unless the object fills the frame edge to edge.
+        # A robust bounding box: wider for the background unless the object fills the frame edge to edge.
         swap = _spread(estimate.alternative_prev_points) > _spread(kept_points)
     elif previous.alternative is not None and len(kept_points):
         background_ends = previous.curr_points[previous.inliers]  # in this pair's first frame

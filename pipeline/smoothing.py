@@ -142,18 +142,12 @@ def _finish(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_star
     that the output's rotation (relative to its shot's first frame) is 0."""
     original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
     if config.horizon_lock:
-        centre = ((width - 1) / 2.0, (height - 1) / 2.0)
         for t in range(len(orig_from_stab)):
-            turned = orig_from_stab[t] @ _rotation_about(-math.radians(smoothed[t, 2]), centre)
+            turned = orig_from_stab[t] @ l1_path.similarity((0.0, 0.0, -math.radians(smoothed[t, 2]), 0.0),
+                                                             width, height)
             orig_from_stab[t] = turned / turned[2, 2]
         original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
     return SmoothingResult(orig_from_stab, segment_starts, original, smoothed)
-
-
-def _rotation_about(angle: float, centre: tuple[float, float]) -> np.ndarray:
-    c, s = math.cos(angle), math.sin(angle)
-    cx, cy = centre
-    return np.array([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy], [0.0, 0.0, 1.0]])
 
 
 def _l1_paths(curr_from_prev: np.ndarray, segment_starts: Sequence[int], segment_end: Sequence[int],

@@ -17,21 +17,30 @@ from pipeline.stabilize import StabilizeConfig, estimate_motion
 from pipeline.synthetic import SyntheticConfig, generate
 
 
+def motion_and_worst_error(video, config: motion.MotionConfig) -> tuple[np.ndarray, float]:
+    """The motion pass's inter-frame transforms on the clip, and their worst corner error against the truth."""
+    found = estimate_motion(ArraySource(video.frames, fps=30, name="truth"), config, observer=NullObserver(),
+                            progress=null_progress, total=None)
+    return found.curr_from_prev, max(geometry.corner_error(found.curr_from_prev[t], video.curr_from_prev[t], 640, 360)
+                                     for t in range(1, video.n_frames))
+
+
+def estimate_motion_errors(video, config: motion.MotionConfig) -> float:
+    return motion_and_worst_error(video, config)[1]
+
+
 def residual_shake(size: tuple[float, float], seed: int) -> tuple[float, float, float]:
     """(object's share of the frame, worst corner error of the inter-frame motion in px, RMS second difference of
     the stabilized frame centre's world position in px)."""
     video = generate(SyntheticConfig(n_frames=45, object_kind="person", person_size=size, seed=seed,
                                      blurred_frames=(), image="astronaut", object_sweep=0.15))
-    found = estimate_motion(ArraySource(video.frames, fps=30, name="truth"), StabilizeConfig().motion,
-                            observer=NullObserver(), progress=null_progress, total=None)
-    errors = [geometry.corner_error(found.curr_from_prev[t], video.curr_from_prev[t], 640, 360)
-              for t in range(1, video.n_frames)]
-    path = smoothing.smooth(found.curr_from_prev, smoothing.SmoothingConfig(), width=640, height=360)
+    curr_from_prev, worst = motion_and_worst_error(video, StabilizeConfig().motion)
+    path = smoothing.smooth(curr_from_prev, smoothing.SmoothingConfig(), width=640, height=360)
     centre = np.array([319.5, 179.5, 1.0])
     world = np.array([(np.linalg.inv(video.frame_from_world[t]) @ path.orig_from_stab[t] @ centre)[:2]
                       for t in range(video.n_frames)])
     share = float(np.mean([m.mean() for m in video.object_mask]))
-    return share, max(errors), float(np.sqrt(np.mean(np.diff(world, 2, axis=0) ** 2)))
+    return share, worst, float(np.sqrt(np.mean(np.diff(world, 2, axis=0) ** 2)))
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -66,13 +75,6 @@ def test_first_pair_prefers_the_motion_whose_tracks_spread_wider():
     # One motion only: nothing to choose.
     single = motion.MotionEstimate(curr_from_prev=camera, status="ok")
     assert motion.choose_background(single, None, 640, 360) is single
-
-
-def estimate_motion_errors(video, config):
-    found = estimate_motion(ArraySource(video.frames, fps=30, name="truth"), config, observer=NullObserver(),
-                            progress=null_progress, total=None)
-    return max(geometry.corner_error(found.curr_from_prev[t], video.curr_from_prev[t], 640, 360)
-               for t in range(1, video.n_frames))
 
 
 def test_an_ignore_mask_video_keeps_features_off_the_figure(tmp_path, monkeypatch):
