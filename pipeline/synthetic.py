@@ -1,16 +1,11 @@
 """Synthetic hand-held video with exact ground truth: the built-in demo input and the basis of truth tests.
 
-A wide "world" canvas (a real photograph from ``skimage.data``, upscaled so that every camera view plus a
-generous margin lies inside it) is filmed by a virtual camera whose path is a smooth intentional path (a slow
-pan plus slow sinusoidal drift and roll) with hand-held jitter on top (band-limited random translation, roll
-and zoom). A textured disc (the mission patch from ``skimage.data.astronaut``, with a green rim) moves
-through the world on its own path and is composited into the world before the camera warp. With
-``object_kind="person"`` the foreground is instead a figure a fifth of the frame wide and over half its height,
-dressed in a texture cut from the world photograph (rotated half a turn, so the same colour statistics as the
-background but other content) and walking 10-25 px a frame with random changes of speed and direction: the
-case where colour alone cannot tell foreground from background, and global alignment is wrong on a large
-area. The background hidden behind the object is kept (``hidden_background``). A few frames are
-motion-blurred with a known linear kernel; their sharp versions are kept.
+A "world" canvas (a photograph from ``skimage.data``, upscaled so every camera view plus a margin lies inside it)
+is filmed by a virtual camera: a smooth intentional path (slow pan, drift and roll) plus band-limited hand-held
+jitter (translation, roll, zoom). A foreground object is composited into the world before the camera warp: a
+textured disc, or (``object_kind="person"``) a person-sized figure dressed in the world photograph's own colours,
+walking 10-25 px a frame; the background it hides is kept. A few frames are motion-blurred with a known linear
+kernel; their sharp versions are kept.
 
 Coordinate convention (whole project): ``a_from_b`` is a 3x3 homogeneous matrix mapping pixel coordinates in
 ``b`` to pixel coordinates in ``a``, acting on column vectors ``(x, y, 1)``; x right, y down, the centre of
@@ -27,8 +22,6 @@ coordinates) and zoomed by ``s_t`` (frame pixels per world pixel)::
 The jitter is added to these parameters: ``c = c_int + dc``, ``theta = theta_int + dtheta``,
 ``s = s_int * (1 + ds)``, each a zero-mean band-limited Gaussian process (default band 1.5-6 Hz, 4th order
 Butterworth-shaped amplitude spectrum) normalised to the configured standard deviation over the clip.
-
-This module never imports rerun or matplotlib.
 """
 
 from __future__ import annotations
