@@ -1,91 +1,25 @@
 """Deblurring by transferring sharper pixels from neighbouring frames (thesis chapter 5, eqs. 28-31).
 
-No point spread function is estimated. Each frame's relative blurriness is measured (eq. 28), and the pixels
-of a frame are replaced by a weighted interpolation of itself and the *sharper* neighbours, warped into its
-coordinates (eqs. 29-31).
-
-Relative blurriness (eq. 28)
-    b_t = 1 / sum_p ((f_x * I_t)(p)^2 + (f_y * I_t)(p)^2), with Sobel derivative filters on the intensity.
-    It only compares similar images, so every frame of the window (t and the neighbours compared with it) is
-    measured over the *common coverage*: the part of the scene all of them see, a convex polygon found from
-    the inter-frame transforms and rasterised in each frame's own, unwarped coordinates. Measuring the original
-    frames, not the warped ones, keeps the resampling (whose smoothing depends on each frame's sub-pixel
-    phase) out of the ratio. The sum is taken as a mean, so that the polygon's slightly different pixel area
-    in zoomed frames does not count as sharpness; over equal areas the ratio b_t / b_t' is eq. 28's.
-
-Interpolation (eqs. 29-31)
+No point spread function is estimated. Relative blurriness (eq. 28): b_t = 1 / mean_p |grad I_t(p)|^2 (Sobel,
+intensity), each frame of the window measured on its original pixels over the part of the scene all of them see,
+so that b_t / b_t' compares the same content. Interpolation (eqs. 30-31):
     I^_t(p) = (I_t(p) + sum_t' w_t'(p) I_t'(T p)) / (1 + sum_t' w_t'(p)),
     w_t'(p) = b_t / b_t' * alpha / (E_t'(p) + alpha) where b_t / b_t' > ``min_ratio`` (eq. 31: 1), else 0.
+Alignment error E (eq. 29 made blur-tolerant): the max over R, G, B of the low-passed *signed* difference,
+|G_sigma * (I_t' - I_t)|; blur by a kernel that sums to 1 leaves low frequencies unchanged, a moving object or a
+misregistration does not. Rejection (beyond eq. 31, whose weight decays only as 1 / E): a neighbour's pixel with
+E above ``reject_error``, or where ``StructureGuard`` finds other structure (a person dressed like the
+background), gets no weight, nor does anything within ``reject_grow_px`` of one.
 
-Alignment error E (eq. 29 made blur-tolerant)
-    Eq. 29's |I_t'(T p) - I_t(p)| cannot tell a blurred frame from a misaligned one: comparing a blurred frame
-    with a sharp, perfectly aligned neighbour gives a large error on every textured edge, exactly where the
-    sharper pixels are wanted. Blur by a kernel that sums to 1 leaves the low frequencies unchanged, so the
-    *signed* difference is low-passed before taking its magnitude: E = max over R, G, B of
-    |G_sigma * (I_t' - I_t)| (normalised convolution over the pixels both frames have). A moving object or a
-    misregistration changes the local mean colour and keeps a large E; blur does not. On pipeline.synthetic
-    (640x360, 12 px blur, blurred frame against its sharp neighbour, exact transforms), E in intensity levels
-    on the static background (p50, p90) and where the neighbour shows the moving object and frame t does not
-    (p10, p50): sigma 0 (eq. 29 as written) 3, 22 | 112, 176; sigma 2: 1.6, 11 | 98, 137; sigma 4: 0.9, 6 |
-    71, 99; sigma 8: 0.5, 3 | 40, 60.
+Invariants: only sharper neighbours contribute; pixels no sharper neighbour covers keep their value (a missing
+pixel of ``--mode none`` stays missing); lengths (sigma, growth, windows) are for 360 rows and scale with the
+frame height. It runs last, on the frame about to be written (pipeline/stabilize.py), reusing completion's
+neighbours, so transferred pixels are resampled once and completed pixels are sharpened like the rest.
 
-Rejection (an addition to eq. 31)
-    alpha / (E + alpha) decays only as 1 / E, and the ratio multiplies it: a blurred frame with ~9 sharper
-    neighbours at b_t / b_t' ~ 4 still takes ~80% of a moving object's pixels from neighbours that show it
-    elsewhere (a ghost), whatever alpha. So a neighbour's pixel whose E exceeds ``reject_error``, or lies within
-    ``reject_grow_px`` of one that does (the object's interior can match by chance), gets no weight at all.
-    E compares colours only, so ``StructureGuard`` also refuses where the local structure disagrees (a person
-    dressed like the background), with the same growth.
-
-Choices, measured with ``benchmarks/deblur_psnr.py --sweep`` (640x360 clips over coffee, astronaut, chelsea x
-2 seeds, 24 blurred and 60 sharp frames; PSNR change on blurred frames, on the moving object's interior, and the
-object's share taken from neighbours)::
-
-    alpha                 1: +5.18 dB    2: +5.48    4: +5.61    8: +5.68    16: +5.70    64: +5.72
-    rejection             none: +2.55 dB, object -3.76 dB, share 0.79    E > 16, grow 4: +5.10, 0.00
-                          E > 32, grow 4: +5.69, object -0.17, 0.03      E > 32, grow 8: +5.68, 0.00, 0.00
-                          E > 64, grow 8: +5.10, object -0.95, 0.20
-    sigma (px)            0 (eq. 29): +0.89 dB    2: +3.33    4: +5.68    8: +4.60 (object -1.71)
-    min ratio             1 (eq. 31): +5.47 dB, sharp frames +0.31 dB at ~7x the time per sharp frame
-                          1.05-1.5: +5.66 to +5.68, sharp frames untouched
-
-alpha: the gain saturates above 8 (within 0.04 dB of 64); a finite alpha still prefers the better aligned
-neighbours below the rejection threshold, which matters on real footage (estimated motion, parallax) more than
-on exact synthetic transforms. min ratio 1.1 rather than eq. 31's 1: equally sharp frames differ by a few
-percent (over the common coverage, on four real clips whose sharpness barely varies, the middle 90% of the
-ratios lie within 0.95-1.06, 0.91-1.09 on the fourth), and averaging them costs ~60 ms a frame for a fraction
-of a dB; equally blurred neighbours also dilute the gain (+5.47 against +5.68 dB). Lengths
-(sigma, grow) are for 360 rows and scale with the frame height, as blur lengths in pixels do.
-
-Where it runs (pipeline/stabilize.py): on the output frame, after warping and, in full mode, after completion,
-with completion's neighbours in frame t's stabilized coordinates (their colours warped once, here). Transferred
-pixels are resampled once (as the target's own are), where deblurring before warping
-(OpenCV's videostab order) would resample them twice; and every output pixel, completed ones included, is
-treated alike, so the frame stays full. Measured (``--placement``, 24 blurred frames, PSNR over the frame /
-over the completed pixels): no deblurring 26.35 / 35.93 dB, deblurring after completion 32.05 / 44.66, the
-stabilized frame before completion 31.99 / 38.97 (the completed pixels, taken from neighbours of every
-sharpness, are then never sharpened). Pixels no sharper neighbour covers keep their value: a missing (black) pixel of
-``--mode none`` stays missing.
-
-How it is computed (``deblur``; the compiled pieces are in pipeline/deblur_kernels.py), to the result of
-whole-frame warps and full-resolution maps within float32 rounding, except on a neighbour's 1-px coverage
-boundary (tests/test_deblur.py)
-    Per target: the error's working resolution (``alignment_error``) and the target's copy there, made once.
-    Per sharper neighbour: only its colours are warped at full resolution (one cv2 warp; a fused numba
-    sampler measured ~2x slower than it; whole-frame warps already at hand are used as they are). The error's
-    low-res copy of it is INTER_AREA of that warp (warping a downscaled original instead saved no measurable
-    time and agreed less with the old result: 58 against 74 dB). Which pixels it covers is solved per row from
-    its transform, a run of columns (WarpedNeighbour.sample's rule: every bilinear tap inside the frame), and
-    so is the share of valid pixels in each low-res cell; no coverage mask is warped. The error stays low-res:
-    the upsampled error is a convex combination of four low-res values, so it can exceed ``reject_error`` only
-    next to a low-res value that does, and only those bands of rows are upsampled, thresholded and dilated.
-    Then one pass over the rows adds every neighbour to a row's sums while they are in cache, upsampling E on
-    the fly, and divides (eq. 30). Blurriness maps (``EnergyCache``) are filtered and reduced in one pass too. Measured
-    through stabilize_source (24-frame pipeline.synthetic clips, one worker, mean per frame, none / full mode):
-    640x360 26 -> 20 / 25 -> 18 ms, 1920x1080 185 -> 99 / 177 -> 93 ms; what is left is mostly the colour
-    warps and the blending pass.
-
-This module never imports rerun or matplotlib.
+``deblur`` equals whole-frame warps and full-resolution maps within float32 rounding, except on a neighbour's
+1-px coverage boundary (tests/test_deblur.py): coverage is solved per row from the transform, E stays at low
+resolution and is upsampled only where it can cross the threshold, and one pass over the rows blends every
+neighbour (pipeline/deblur_kernels.py). Choices and measurements: docs/deblurring.md.
 """
 
 from __future__ import annotations
