@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ffviz import batch
 from pipeline import stabilize as stab
-from pipeline import synthetic
+from pipeline.evaluation import synthetic
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
 """Choose the default smoothing radius k from the real clips (docs/how-it-works.md, "Choosing k").
 
 For each clip: one motion pass, then for each k the residual jitter the output would have, measured
-exactly as pipeline.metrics measures a video (its trajectory() and residual_jitter() applied to the
+exactly as pipeline.evaluation.metrics measures a video (its trajectory() and residual_jitter() applied to the
 output's inter-frame motion stab_t <- stab_(t-1) = S_t^-1 T_t S_(t-1)), and the crop it costs (area kept
 by the largest window valid in every frame).
 Usage: python benchmarks/choose_k.py [--radii 0,6,15] [CLIPS...]   (default: every clip in ../shared/videos)
@@ -14,9 +14,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from pipeline import metrics, motion, smoothing, stabilize, video_io, warping
-from pipeline.observer import NullObserver, null_progress
-from pipeline.source import FileSource
+from pipeline.evaluation import metrics
+from pipeline.stages import motion, smoothing, warping
+from pipeline import stabilize
+from pipeline.runtime import video_io
+from pipeline.runtime.observer import NullObserver, null_progress
+from pipeline.runtime.source import FileSource
 
 RADII = (0, 6, 15, 30, 45, 60, 90)
 VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"

@@ -1,6 +1,6 @@
 """Benchmark: PSNR of the synthesized pixels (ours vs OpenCV's CPU chain vs Telea) and full-mode speed.
 
-Ground truth (pipeline/evaluation.py):
+Ground truth (pipeline/evaluation/completion.py):
 - synthetic worlds (skimage photographs) with hand-held jitter and a textured object crossing the borders;
 - jittered 80 % crops of the real clips in ../shared/videos (skipped when absent): the wide frame is the truth.
 Then frames per second of full mode at 640x360 (synthetic, in memory: no decode/encode) with the time per stage.
@@ -8,7 +8,7 @@ Then frames per second of full mode at 640x360 (synthetic, in memory: no decode/
 With --flicker CLIP: instead, the temporal change of the completed pixels of CLIP's full-mode run by what filled
 them in the previous and the current frame (CompletionResult.source), against the real pixels' change. Frame t-1's
 completed frame is carried onto frame t by the stabilizer's own transforms (S_{t-1}^-1 M_t^-1 S_t, no estimation
-error); pixels within 2 px of either frame's missing-area outline count as neither, as in pipeline.metrics.
+error); pixels within 2 px of either frame's missing-area outline count as neither, as in pipeline.evaluation.metrics.
 
 Usage: python benchmarks/completion_psnr.py [--frames 48] [--clips a.mp4,b.avi] [--skip-real] [--skip-speed]
        python benchmarks/completion_psnr.py --flicker ../shared/videos/selh_asb_1.mp4
@@ -27,15 +27,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pipeline import completion, smoothing
-from pipeline.observer import NullObserver
+from pipeline.stages import completion, smoothing
+from pipeline.runtime.observer import NullObserver
 from pipeline.stabilize import stabilize
 
-from pipeline.evaluation import METHODS, CompletionScores, completion_scores, crop_completion_scores, jittered_crop
-from pipeline.smoothing import SmoothingConfig
-from pipeline.source import ArraySource, FileSource, one_pass
+from pipeline.evaluation.completion import METHODS, CompletionScores, completion_scores, crop_completion_scores, jittered_crop
+from pipeline.stages.smoothing import SmoothingConfig
+from pipeline.runtime.source import ArraySource, FileSource, one_pass
 from pipeline.stabilize import StabilizeConfig, stabilize_source
-from pipeline.synthetic import SyntheticConfig, generate
+from pipeline.evaluation.synthetic import SyntheticConfig, generate
 
 VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
 SYNTHETIC = (("coffee", 1), ("coffee", 2), ("astronaut", 3), ("chelsea", 4), ("rocket", 5))

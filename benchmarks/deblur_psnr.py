@@ -1,6 +1,6 @@
-"""Deblurring (pipeline/deblur.py) on synthetic ground truth: PSNR gain, ghosting, and the time it adds.
+"""Deblurring (pipeline/stages/deblur.py) on synthetic ground truth: PSNR gain, ghosting, and the time it adds.
 
-Cases: pipeline.synthetic clips (640x360, 30 frames, hand-held jitter, a moving textured disc, frames t % 10 in
+Cases: pipeline.evaluation.synthetic clips (640x360, 30 frames, hand-held jitter, a moving textured disc, frames t % 10 in
 {2, 5, 8} blurred by a 12 px linear kernel) over several photographs and seeds. Frames 8..21 are judged (full
 windows of 6 neighbours either side). Each frame is placed as the orchestrator places it, in its stabilized view
 (here the intended, jitter-free one, from the exact transforms), with neighbours warped there by the exact
@@ -29,9 +29,10 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from pipeline import completion, deblur, synthetic, warping
-from pipeline.neighbours import WarpedNeighbour, warp_neighbours
-from pipeline.synthetic import psnr
+from pipeline.stages import completion, deblur, warping
+from pipeline.evaluation import synthetic
+from pipeline.stages.neighbours import WarpedNeighbour, warp_neighbours
+from pipeline.evaluation.synthetic import psnr
 
 WIDTH, HEIGHT, N_FRAMES = 640, 360, 30
 JUDGED = range(8, 22)

@@ -1,10 +1,10 @@
 """Moving people on ground truth: does deblurring or completion make them see-through? (issue: dynamic scenes)
 
-Cases: pipeline.synthetic clips at 640x360, 30 frames, frames t % 10 in {2, 5, 8} blurred by a 12 px kernel:
+Cases: pipeline.evaluation.synthetic clips at 640x360, 30 frames, frames t % 10 in {2, 5, 8} blurred by a 12 px kernel:
 "person" clips (a figure a fifth of the frame wide and over half its height, dressed in a crop of the world
 photograph, walking 10-25 px a frame; sweep > 1 walks it into the borders completion synthesizes) and the
 existing "disc" clips (the textured disc; static background) for reference. Each case runs the real orchestrator
-in full mode with deblurring (pipeline.evaluation.dynamic_scores); "no deblur" is what deblurring was handed,
+in full mode with deblurring (pipeline.evaluation.completion.dynamic_scores); "no deblur" is what deblurring was handed,
 exactly the --no-deblur output. Optionally the same with the colour-only rule (the structure guard off).
 
 Columns:
@@ -14,7 +14,7 @@ Columns:
   blur gain  PSNR over blurred frames, deblurred minus not deblurred (dB)
   synth      PSNR over synthesized pixels: ours / mosaic + Telea (OpenCV's CPU chain), and the margin
   synth show show-through inside the object over synthesized pixels
-  flicker    (--flicker) pipeline.metrics' synthesized-pixel flicker ratio of the output video, when available
+  flicker    (--flicker) pipeline.evaluation.metrics' synthesized-pixel flicker ratio of the output video, when available
 
 Usage: python benchmarks/dynamic_scene.py [--colour-only] [--flicker] [--report docs/benchmarks-dynamic.md]
 """
@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline import deblur
-from pipeline.evaluation import dynamic_scores
+from pipeline.stages import deblur
+from pipeline.evaluation.completion import dynamic_scores
 from pipeline.stabilize import StabilizeConfig, stabilize
-from pipeline.synthetic import SyntheticConfig, generate, write_video
+from pipeline.evaluation.synthetic import SyntheticConfig, generate, write_video
 
 CASES = (  # name, image, seed, object kind, sweep
     ("person chelsea", "chelsea", 3, "person", 0.6),
@@ -47,7 +47,7 @@ CASES = (  # name, image, seed, object kind, sweep
 
 
 def flicker(video, config: StabilizeConfig) -> float:
-    from pipeline import metrics
+    from pipeline.evaluation import metrics
 
     with tempfile.TemporaryDirectory() as folder:
         source, output = Path(folder) / "in.mp4", Path(folder) / "out.mp4"

@@ -22,8 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline import completion, video_io
-from pipeline.observer import NullObserver
+from pipeline.stages import completion
+from pipeline.runtime import video_io
+from pipeline.runtime.observer import NullObserver
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"

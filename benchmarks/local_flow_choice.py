@@ -1,9 +1,9 @@
-"""Choose the default local-flow method (pipeline/local_flow.py docstring) by accuracy and speed.
+"""Choose the default local-flow method (pipeline/stages/local_flow.py docstring) by accuracy and speed.
 
 Two kinds of truth, both 640x360:
   photo   a real photograph (skimage.data) and a copy resampled along a known smooth flow (affine 0.5-3 px plus a
           sinusoid of 1 px), so target(p) = neighbour(p + f(p)) exactly; black invalid bands on both, mild noise.
-  video   pipeline.synthetic: frame t in its stabilized (intended) coordinates and neighbour t' warped there by the
+  video   pipeline.evaluation.synthetic: frame t in its stabilized (intended) coordinates and neighbour t' warped there by the
           exact transforms. Truth: zero on the static background, the object's own motion on its footprint.
 EPE (end-point error, px) on LocalFlowResult.common: mean over everything, background only, the object's interior
 only; ms per frame pair (median of repeats, including grey conversion and filling).
@@ -19,9 +19,9 @@ import time
 import cv2
 import numpy as np
 
-from pipeline import synthetic
-from pipeline.local_flow import LocalFlowConfig, fill_invalid, local_flow
-from pipeline.warping import warp, warp_frame
+from pipeline.evaluation import synthetic
+from pipeline.stages.local_flow import LocalFlowConfig, fill_invalid, local_flow
+from pipeline.stages.warping import warp, warp_frame
 
 WIDTH, HEIGHT = 640, 360
 CANDIDATES = {

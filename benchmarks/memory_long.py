@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/memory_long.py [--modes crop,none] [--seconds 30,300] [--size 1920x1080]
                                                [--fps 30] [--work DIR]
 
-Each clip is rendered frame by frame (pipeline.synthetic.stream_frames) straight into an H.264 MP4, so
+Each clip is rendered frame by frame (pipeline.evaluation.synthetic.stream_frames) straight into an H.264 MP4, so
 the generator never holds the video; clips are kept in --work and reused. Each run of `ffviz stabilize`
 is a child process measured as `ffviz bench` measures (ffviz.bench.run_measured: wall and CPU seconds,
 peak RSS from wait4). Streaming should make the peak independent of the length: the verdict printed
@@ -22,7 +22,7 @@ from typing import Iterator
 import numpy as np
 
 from ffviz.bench import ffviz_command, run_measured
-from pipeline import synthetic
+from pipeline.evaluation import synthetic
 
 PEAK_GROWTH_LIMIT = 1.10  # the long clip's peak may exceed the short one's by at most 10 %
 PEAK_LIMIT_BYTES = int(1.5 * 2**30)

@@ -1,6 +1,6 @@
 """eq. 18 (Gaussian) against the L1-optimal path on the shared clips: steadiness, kept area, border flicker.
 
-For each clip and mode (full, crop) and path, `ffviz stabilize` writes the output and pipeline.metrics compares it
+For each clip and mode (full, crop) and path, `ffviz stabilize` writes the output and pipeline.evaluation.metrics compares it
 with the input. Printed: residual jitter (px, deg; lower is steadier), cropping ratio (share of the frame kept;
 1 in full mode), synthesized-pixel flicker (full mode), and the path planning time (s).
 
@@ -14,10 +14,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from pipeline import metrics, smoothing
+from pipeline.evaluation import metrics
+from pipeline.stages import smoothing
 from pipeline.stabilize import StabilizeConfig, estimate_motion, stabilize
-from pipeline.source import FileSource
-from pipeline.observer import NullObserver, null_progress
+from pipeline.runtime.source import FileSource
+from pipeline.runtime.observer import NullObserver, null_progress
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "videos"
 DEFAULT_CLIPS = ("linyihaolyh_shaky.mp4", "sudheerachary_small-shaky-5.avi", "selh_asb_1.mp4", "vplab_C.avi",

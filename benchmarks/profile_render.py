@@ -16,10 +16,10 @@ import pstats
 import sys
 import time
 
-from pipeline.parallel import default_workers
-from pipeline.source import ArraySource
+from pipeline.runtime.parallel import default_workers
+from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
-from pipeline.synthetic import SyntheticConfig, generate
+from pipeline.evaluation.synthetic import SyntheticConfig, generate
 
 
 def main(argv: list[str] | None = None) -> int:

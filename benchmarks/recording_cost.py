@@ -1,5 +1,5 @@
 """What a Rerun recording costs: run time with --record summary and --record full against no recording, and
-the .rrd's size per 100 frames, on a synthetic 640x360 clip (pipeline.synthetic), in --mode none and full.
+the .rrd's size per 100 frames, on a synthetic 640x360 clip (pipeline.evaluation.synthetic), in --mode none and full.
 
 Each configuration runs the whole library call (both passes, the output video written), interleaved
 (none, summary, full, none, ...) so that load on a shared machine spreads over all of them. Columns: wall
@@ -23,7 +23,7 @@ from pathlib import Path
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 from ffviz.recorder import RerunRecorder  # noqa: E402
-from pipeline import synthetic  # noqa: E402
+from pipeline.evaluation import synthetic  # noqa: E402
 from pipeline.stabilize import StabilizeConfig, stabilize  # noqa: E402
 
 LEVELS = (None, "summary", "full")
@@ -82,7 +82,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="ffviz-recording-cost-") as tmp:
         folder = Path(tmp)
         if args.clip is not None:
-            from pipeline.video_io import count_frames
+            from pipeline.runtime.video_io import count_frames
 
             clip = args.clip
             args.frames = count_frames(clip)

@@ -17,10 +17,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-from pipeline import segments, video_io
+from pipeline.runtime import segments, video_io
 from pipeline import stabilize as stab
 from pipeline.errors import ConfigError, FFVizError, InputError
-from pipeline.observer import NullObserver, Observers, Stamp
+from pipeline.runtime.observer import NullObserver, Observers, Stamp
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".webm", ".mts", ".mpg", ".mpeg")
 MARKERS = ".ffviz-batch"  # folder in OUTDIR: one JSON marker per finished output

@@ -5,7 +5,7 @@ memory from the child's own rusage (os.wait4), so no method pays for the benchma
 of the machine's CPU time that the hypervisor took meanwhile (steal, /proc/stat): on a virtual machine whose
 host is busy, a program on both cores loses more than one on one core, so ratios between methods move with
 it. Runs are interleaved: for each repeat, for each clip, the methods in an order rotated by one at every
-visit, so a drift in the machine's load falls on all methods alike. Quality is pipeline.metrics.compare of
+visit, so a drift in the machine's load falls on all methods alike. Quality is pipeline.evaluation.metrics.compare of
 each output against its input, once per clip and method (outputs do not change between repeats).
 
 Peers (skipped with a one-line note when absent): ffmpeg's two-pass vid.stab and one-pass deshake
@@ -298,8 +298,8 @@ def _finite(value: float) -> float | None:
 
 
 def input_row(clip: Path) -> BenchRow:
-    from pipeline import metrics
-    from pipeline.video_io import probe_video
+    from pipeline.evaluation import metrics
+    from pipeline.runtime.video_io import probe_video
 
     info = probe_video(clip)
     own = metrics.video_motion_stats(clip)
@@ -310,7 +310,7 @@ def input_row(clip: Path) -> BenchRow:
 
 def describe_output(output: Path) -> tuple[str, float | None]:
     """(video codec, kbit/s of the whole file over its duration) of a written output."""
-    from pipeline.video_io import probe_video
+    from pipeline.runtime.video_io import probe_video
 
     info = probe_video(output)
     kbit_s = output.stat().st_size * 8 / 1000 / info.duration_s if info.duration_s > 0 else None
@@ -318,7 +318,7 @@ def describe_output(output: Path) -> tuple[str, float | None]:
 
 
 def measure_quality(clip: Path, output: Path) -> Quality:
-    from pipeline import metrics
+    from pipeline.evaluation import metrics
 
     m = metrics.compare(clip, output)
     return Quality(*(_finite(v) for v in (m.residual_jitter_px, m.stability_translation, m.stability_rotation,
@@ -379,7 +379,7 @@ def _clips(paths: Sequence[Path], out: Path) -> list[Path]:
 
 def _synthetic_clip(folder: Path) -> Path:
     """The demo's synthetic clip (640x360, 120 frames, seed 0), generated once."""
-    from pipeline import synthetic
+    from pipeline.evaluation import synthetic
 
     path = folder / f"synthetic_demo_{DEMO_FRAMES}.mp4"
     if not path.is_file():

@@ -135,7 +135,7 @@ def write_all(rows: Sequence[BenchRow], out: Path, run: RunInfo) -> list[Path]:
         f"{seconds_note}; fps = input frames / seconds; cpu_s = user + system seconds; "
         "steal_pct = share of the machine's CPU time the hypervisor took during the run (median); "
         "peak_MiB = the method's peak RSS (wait4); codec, kbit_s = what it wrote (file size over duration); "
-        "quality from pipeline.metrics.compare against the input; flicker = frame-to-frame change of the "
+        "quality from pipeline.evaluation.metrics.compare against the input; flicker = frame-to-frame change of the "
         "synthesized pixels over that of the real ones (synth_flicker_ratio; - without synthesized pixels).",
         f"{run.cpus} CPUs; load average {run.load_before[0]:.1f} at the start, {run.load_after[0]:.1f} at the end.",
         *run.notes, "", *targets(rows), ""]))
@@ -224,7 +224,7 @@ def write_report(rows: Sequence[BenchRow], path: Path, run: RunInfo, *, clips: S
         HEADER, *map(markdown_line, rows), "",
         "fps = input frames / seconds; cpu_s = user + system seconds; steal_pct = share of the machine's CPU time "
         "the hypervisor took during the run (median); peak_MiB = the method's peak RSS (wait4); codec, kbit_s = what "
-        "it wrote (file size over duration); quality from pipeline.metrics.compare against the input.",
+        "it wrote (file size over duration); quality from pipeline.evaluation.metrics.compare against the input.",
         *(f"- {note}" for note in run.notes),
         "",
         f"![speed against steadiness, frames/s and peak memory]({png.name})",

@@ -17,7 +17,9 @@ from typing import Sequence
 
 from ffviz.runner import DEFAULT_RECORDINGS, output_encoding, run_stabilize, stabilize_config
 from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (tests call cli.view_command)
-from pipeline import deblur, motion, smoothing, stabilize as stab, video_io
+from pipeline.stages import deblur, motion, smoothing
+from pipeline import stabilize as stab
+from pipeline.runtime import video_io
 from pipeline.errors import ConfigError, FFVizError
 
 _stabilize_config = stabilize_config  # the name tests/test_deblur.py uses
@@ -268,7 +270,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_metrics(args: argparse.Namespace) -> int:
     from ffviz.progress import tqdm_callback
-    from pipeline import metrics
+    from pipeline.evaluation import metrics
 
     progress, close = tqdm_callback("measuring both videos")
     try:

@@ -8,8 +8,9 @@ import time
 import numpy as np
 
 from ffviz.runner import recording_path, run_stabilize, written_line
-from pipeline import geometry, metrics, synthetic
-from pipeline.observer import StageCollector
+from pipeline import geometry
+from pipeline.evaluation import metrics, synthetic
+from pipeline.runtime.observer import StageCollector
 
 
 def run_demo(args: argparse.Namespace) -> int:

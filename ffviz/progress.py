@@ -1,4 +1,4 @@
-"""Progress bars for the CLI (tqdm on stderr), matching pipeline.observer.ProgressFactory.
+"""Progress bars for the CLI (tqdm on stderr), matching pipeline.runtime.observer.ProgressFactory.
 
 In a terminal every long step shows a bar with its ETA; when stderr is not a terminal (logs, CI, pipes) the
 bars are off, so logs hold only the one-line messages.
@@ -24,7 +24,7 @@ def tqdm_progress(description: str, total: int | None, unit: str = "frame") -> t
 
 
 def tqdm_callback(description: str, unit: str = "frame") -> tuple[Callable[[int, int], None], Callable[[], None]]:
-    """A ``progress(done, total)`` callback (the form pipeline.metrics takes) drawing a bar, and its close."""
+    """A ``progress(done, total)`` callback (the form pipeline.evaluation.metrics takes) drawing a bar, and its close."""
     bar: tqdm | None = None
 
     def update(done: int, total: int) -> None:

@@ -29,12 +29,12 @@ import ffviz
 from ffviz import entities as ent, trace, visual
 from ffviz.blueprint import default_blueprint
 from pipeline import geometry
-from pipeline.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
-from pipeline.motion import MotionEstimate
-from pipeline.observer import Stamp
-from pipeline.smoothing import SmoothingResult
-from pipeline.video_io import Frame
-from pipeline.warping import WarpResult
+from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
+from pipeline.stages.motion import MotionEstimate
+from pipeline.runtime.observer import Stamp
+from pipeline.stages.smoothing import SmoothingResult
+from pipeline.runtime.video_io import Frame
+from pipeline.stages.warping import WarpResult
 
 RecordLevel = Literal["summary", "full"]
 RECORD_LEVELS: tuple[str, ...] = ("summary", "full")

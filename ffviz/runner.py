@@ -15,9 +15,11 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from pipeline import deblur, motion, smoothing, stabilize as stab, video_io
+from pipeline.stages import deblur, motion, smoothing
+from pipeline import stabilize as stab
+from pipeline.runtime import video_io
 from pipeline.errors import ConfigError
-from pipeline.observer import Observer, Observers
+from pipeline.runtime.observer import Observer, Observers
 
 DEFAULT_RECORDINGS = Path("recordings")  # where --rrd without a path writes INPUT_STEM.rrd
 MAX_RADIUS = 100_000  # frames; the smoothing kernel is allocated at 2k+1 taps

@@ -18,11 +18,12 @@ from typing import Iterable, Iterator, Literal
 import cv2
 import numpy as np
 
-from pipeline import completion, deblur, motion, neighbours, parallel, smoothing, video_io, warping
-from pipeline.source import FileSource, FrameSource, PrefetchedSource, one_pass
-from pipeline.window import Windowed, sliding_window
+from pipeline.stages import completion, deblur, motion, neighbours, smoothing, warping
+from pipeline.runtime import parallel, video_io
+from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, one_pass
+from pipeline.runtime.window import Windowed, sliding_window
 from pipeline.errors import ConfigError, InputError
-from pipeline.observer import NullObserver, Observer, ProgressFactory, Stamp, is_null, null_progress
+from pipeline.runtime.observer import NullObserver, Observer, ProgressFactory, Stamp, is_null, null_progress
 
 OutputMode = Literal["full", "none", "crop"]
 OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
@@ -412,7 +413,7 @@ class _FrameRenderer:
             # warps the sharper ones' colours itself), transferred pixels are resampled once, and completed pixels
             # are sharpened like the rest (measured +0.06 dB over the frame, +5.7 dB on the completed pixels,
             # against deblurring before completion), so the frame stays full; missing pixels of --mode none stay
-            # missing. Sharpness is compared on the original frames (pipeline/deblur.py).
+            # missing. Sharpness is compared on the original frames (pipeline/stages/deblur.py).
             deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: frame.rgb},
                                             self.curr_from_prev, self.orig_from_out[t], config.deblur,
                                             warped=warped, cache=self.energy_cache)

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from ffviz import batch, cli
-from pipeline import segments, synthetic, video_io
+from pipeline.runtime import segments, video_io
+from pipeline.evaluation import synthetic
 from pipeline import stabilize as stab
-from pipeline.observer import StageCollector
+from pipeline.runtime.observer import StageCollector
 
 ray = pytest.importorskip("ray")
 

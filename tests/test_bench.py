@@ -17,7 +17,7 @@ import pytest
 
 from ffviz import bench
 from ffviz.cli import main
-from pipeline import synthetic
+from pipeline.evaluation import synthetic
 
 MiB = 2**20
 

@@ -30,8 +30,8 @@ import numpy as np
 import pytest
 
 from ffviz.recorder import RerunRecorder
-from pipeline import synthetic
-from pipeline.video_io import VideoReader
+from pipeline.evaluation import synthetic
+from pipeline.runtime.video_io import VideoReader
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 pytestmark = pytest.mark.slow

@@ -1,7 +1,7 @@
 """Full-frame completion (thesis chapter 4) against ground truth.
 
 The PSNR tests compare, on the same stabilized frames and missing pixels, our chain with the CPU chain
-OpenCV's videostab offers (consistent mosaic + Telea colour inpainting, rebuilt in pipeline/evaluation.py)
+OpenCV's videostab offers (consistent mosaic + Telea colour inpainting, rebuilt in pipeline/evaluation/completion.py)
 and with plain Telea. Measured when written (640x360 or the clip's size, 48 frames):
 - jittered 80 % crops of linyihaolyh_shaky.mp4 (real parallax, pedestrians): ours 31.4 dB, mosaic+telea 28.4,
   telea 22.1;
@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 import skimage.data
 
-from pipeline import completion, neighbours
-from pipeline.evaluation import CompletionScores, completion_scores, crop_completion_scores, jittered_crop
-from pipeline.smoothing import SmoothingConfig
-from pipeline.source import FileSource, one_pass
+from pipeline.stages import completion, neighbours
+from pipeline.evaluation.completion import CompletionScores, completion_scores, crop_completion_scores, jittered_crop
+from pipeline.stages.smoothing import SmoothingConfig
+from pipeline.runtime.source import FileSource, one_pass
 from pipeline.stabilize import StabilizeConfig
-from pipeline.synthetic import SyntheticConfig, generate, psnr
+from pipeline.evaluation.synthetic import SyntheticConfig, generate, psnr
 from tests.conftest import real_clip
 
 FULL = StabilizeConfig(mode="full")

@@ -11,9 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from pipeline import completion, deblur, fmm, l1_path, local_flow, metrics, mosaic, motion, smoothing, stabilize
-from pipeline import synthetic
-from pipeline import video_io
+from pipeline.stages import completion, deblur, fmm, l1_path, local_flow, mosaic, motion, smoothing
+from pipeline.evaluation import metrics
+from pipeline import stabilize
+from pipeline.evaluation import synthetic
+from pipeline.runtime import video_io
 from pipeline.errors import ConfigError, FFVizError
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,6 +1,6 @@
 """Deblurring by sharper neighbours (thesis ch. 5, eqs. 28-31) against synthetic ground truth.
 
-Clips are pipeline.synthetic at 320x180 with a 6 px blur (the default 12 px at half the size): real photographs
+Clips are pipeline.evaluation.synthetic at 320x180 with a 6 px blur (the default 12 px at half the size): real photographs
 filmed by a known hand-held camera path, a textured disc moving through them, and frames t % 10 in {2, 5, 8}
 blurred by a known linear kernel. Frames are placed as the orchestrator places them: in their stabilized view
 (the intended, jitter-free one), with the neighbours warped there by the exact transforms; the truth is the world
@@ -16,12 +16,13 @@ import numpy as np
 import pytest
 
 from ffviz import cli
-from pipeline import deblur, deblur_kernels, synthetic, warping
-from pipeline.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
-from pipeline.observer import StageCollector
-from pipeline.source import ArraySource
+from pipeline.stages import deblur, deblur_kernels, warping
+from pipeline.evaluation import synthetic
+from pipeline.stages.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
+from pipeline.runtime.observer import StageCollector
+from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
-from pipeline.synthetic import psnr
+from pipeline.evaluation.synthetic import psnr
 
 SMALL = dict(width=320, height=180, blur_length_px=6.0)
 

@@ -1,9 +1,9 @@
 """Moving people must never turn see-through: deblurring and completion on a dynamic scene with ground truth.
 
-The case (pipeline.synthetic, object_kind="person"): a figure a fifth of the frame wide and over half its height,
+The case (pipeline.evaluation.synthetic, object_kind="person"): a figure a fifth of the frame wide and over half its height,
 dressed in a texture cut from the world photograph itself (so colour alone cannot tell it from the background),
 walking 10-25 px a frame with random turns, on a clip with motion-blurred frames. The truth keeps the figure's
-mask and the background it hides, so show-through is measurable (pipeline.evaluation.dynamic_scores).
+mask and the background it hides, so show-through is measurable (pipeline.evaluation.completion.dynamic_scores).
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline import deblur
-from pipeline.evaluation import dynamic_scores
+from pipeline.stages import deblur
+from pipeline.evaluation.completion import dynamic_scores
 from pipeline.stabilize import StabilizeConfig
-from pipeline.synthetic import SyntheticConfig, generate, psnr
+from pipeline.evaluation.synthetic import SyntheticConfig, generate, psnr
 
 SHARED_VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
 
@@ -115,7 +115,7 @@ def test_deblur_result_says_where_pixels_came_from_and_where_they_were_refused()
     target = cv2.blur(photo, (9, 1))
     other = photo.copy()
     other[120:240, 200:360] = photo[::-1, ::-1][120:240, 200:360]  # other content, the same colours
-    from pipeline.neighbours import WarpedNeighbour
+    from pipeline.stages.neighbours import WarpedNeighbour
     valid = np.ones((height, width), bool)
     result = deblur.deblur(target, valid, [WarpedNeighbour(2, other, valid)], ratios={2: 3.0})
     assert result.neighbours == (2,)
@@ -136,9 +136,9 @@ def test_vplab_woman_stays_as_sharp_as_without_deblurring():
     path = SHARED_VIDEOS / "vplab_C.avi"
     if not path.exists():
         pytest.skip("shared clip vplab_C.avi absent")
-    from pipeline import video_io
-    from pipeline.observer import StageCollector
-    from pipeline.source import ArraySource
+    from pipeline.runtime import video_io
+    from pipeline.runtime.observer import StageCollector
+    from pipeline.runtime.source import ArraySource
     from pipeline.stabilize import stabilize_source
 
     first = 196

@@ -9,9 +9,10 @@ from matplotlib.image import imread
 from ffviz import cli, figures
 from ffviz.recorder import RerunRecorder
 from ffviz.rrd import Recording
-from pipeline import deblur, synthetic
-from pipeline.neighbours import WarpedNeighbour
-from pipeline.observer import NullObserver, Observers, StageCollector
+from pipeline.stages import deblur
+from pipeline.evaluation import synthetic
+from pipeline.stages.neighbours import WarpedNeighbour
+from pipeline.runtime.observer import NullObserver, Observers, StageCollector
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 TRACED = (4, 20)
@@ -20,7 +21,7 @@ FRAMES = (4, 12, 20)
 
 class DeblurAgainstPrevious(NullObserver):
     """Until pipeline/stabilize.py runs deblurring itself: deblur each output frame with the previous output
-    as its one neighbour (a real pipeline.deblur result) and hand it to the recorder as the pipeline will."""
+    as its one neighbour (a real pipeline.stages.deblur result) and hand it to the recorder as the pipeline will."""
 
     def __init__(self, recorder: RerunRecorder) -> None:
         self.recorder = recorder

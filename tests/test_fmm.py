@@ -8,7 +8,7 @@ import pytest
 from scipy import ndimage
 
 from pipeline.errors import ConfigError
-from pipeline.fmm import MotionInpaintConfig, fast_marching, inpaint_motion, sample_flow
+from pipeline.stages.fmm import MotionInpaintConfig, fast_marching, inpaint_motion, sample_flow
 
 H, W = 200, 300
 ROWS, COLS = np.mgrid[:H, :W]

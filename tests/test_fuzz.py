@@ -27,7 +27,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from ffviz import cli
-from pipeline import synthetic, video_io
+from pipeline.evaluation import synthetic
+from pipeline.runtime import video_io
 
 EXAMPLES = int(os.environ.get("FFVIZ_FUZZ_EXAMPLES", "40"))
 LONG_EXAMPLES = int(os.environ.get("FFVIZ_FUZZ_LONG_EXAMPLES", "300"))

@@ -1,4 +1,4 @@
-"""L1-optimal camera paths (pipeline/l1_path.py) on ground truth: the pieces a viewer reads as a tripod, a dolly
+"""L1-optimal camera paths (pipeline/stages/l1_path.py) on ground truth: the pieces a viewer reads as a tripod, a dolly
 and a smooth pan are recovered from a shaken path; the bound holds; long paths are solved in windows without a
 jump; end to end the output is steadier than eq. 18's."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline import l1_path, smoothing
-from pipeline.synthetic import SyntheticConfig, generate
+from pipeline.stages import l1_path, smoothing
+from pipeline.evaluation.synthetic import SyntheticConfig, generate
 
 
 def shaken_path(n: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -111,7 +111,8 @@ def test_cli_path_options_end_to_end(tmp_path, capsys):
     """--path l1, --tripod and --horizon-lock run through the command line; --tripod with --path l1 is refused
     in one line."""
     from ffviz import cli
-    from pipeline import synthetic, video_io
+    from pipeline.evaluation import synthetic
+    from pipeline.runtime import video_io
 
     video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30, seed=3,
                                                          blurred_frames=()))

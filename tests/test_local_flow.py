@@ -6,11 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline import completion, synthetic
-from pipeline.local_flow import LocalFlowConfig, fill_invalid, local_flow, mean_abs_difference
-from pipeline.mosaic import intensity
-from pipeline.neighbours import WarpedNeighbour
-from pipeline.warping import warp, warp_frame
+from pipeline.stages import completion
+from pipeline.evaluation import synthetic
+from pipeline.stages.local_flow import LocalFlowConfig, fill_invalid, local_flow, mean_abs_difference
+from pipeline.stages.mosaic import intensity
+from pipeline.stages.neighbours import WarpedNeighbour
+from pipeline.stages.warping import warp, warp_frame
 
 W, H = 640, 360
 
@@ -198,7 +199,7 @@ def test_large_motion_rescue_finds_what_the_flow_misses(photo, motion):
 
 
 def test_rounding_to_uint8_equals_numpys_for_nonnegative_values():
-    from pipeline.local_flow import _round_to_uint8
+    from pipeline.stages.local_flow import _round_to_uint8
 
     rng = np.random.default_rng(2)
     values = np.concatenate([rng.uniform(0, 300, 100_000), np.arange(0, 258, 0.5),  # every .5 tie up to 257.5

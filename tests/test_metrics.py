@@ -1,4 +1,4 @@
-"""pipeline.metrics: cropping, distortion, black borders, stability and residual jitter.
+"""pipeline.evaluation.metrics: cropping, distortion, black borders, stability and residual jitter.
 
 Synthetic videos are rendered in-test from a real photo (skimage's coffee: textured, almost no black
 pixels) by known camera transforms and written losslessly (FFV1, RGB) so codec noise does not blur
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import skimage.data
 
-from pipeline import metrics
+from pipeline.evaluation import metrics
 from pipeline.errors import InputError
 from tests.conftest import real_clip
 

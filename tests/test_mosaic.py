@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline import synthetic
-from pipeline.mosaic import MosaicConfig, consistent_mosaic
-from pipeline.warping import warp, warp_frame
+from pipeline.evaluation import synthetic
+from pipeline.stages.mosaic import MosaicConfig, consistent_mosaic
+from pipeline.stages.warping import warp, warp_frame
 
 RADIUS = 5  # neighbours t-5..t+5
 

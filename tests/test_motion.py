@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline import geometry, motion
-from pipeline.synthetic import make_two_frames
+from pipeline import geometry
+from pipeline.stages import motion
+from pipeline.evaluation.synthetic import make_two_frames
 
 W, H = 640, 360
 

@@ -1,7 +1,7 @@
-"""Neighbours warped only where they are looked at (pipeline/neighbours.py), and the two completion helpers
+"""Neighbours warped only where they are looked at (pipeline/stages/neighbours.py), and the two completion helpers
 that look at them locally (completion._work_boxes, completion._LocalError).
 
-A lazy neighbour must answer what the whole-frame warp (pipeline.warping.warp_frame) answers: crops and
+A lazy neighbour must answer what the whole-frame warp (pipeline.stages.warping.warp_frame) answers: crops and
 integer-point lookups within OpenCV's fixed-point rounding (measured: at most 1 level on < 0.1% of pixels,
 validity equal except on its 1-pixel boundary); bilinear samples at fractional points exactly as a bilinear
 lookup of the original frame at M p.
@@ -15,8 +15,8 @@ import pytest
 from scipy import ndimage
 from skimage import data
 
-from pipeline import completion, mosaic, smoothing, warping
-from pipeline.neighbours import Downscaled, WarpedNeighbour, shrink, shrink_all, warp_neighbours
+from pipeline.stages import completion, mosaic, smoothing, warping
+from pipeline.stages.neighbours import Downscaled, WarpedNeighbour, shrink, shrink_all, warp_neighbours
 
 H, W = 240, 320
 

@@ -1,4 +1,4 @@
-"""Threads (pipeline/parallel.py): ordered results, bounded look-ahead, errors at their turn, early stops that
+"""Threads (pipeline/runtime/parallel.py): ordered results, bounded look-ahead, errors at their turn, early stops that
 neither hang nor compute everything; decoding ahead (Prefetch, PrefetchedSource) with decoder warnings kept
 at their frame; and a stabilized clip identical for any number of workers."""
 
@@ -12,9 +12,10 @@ from typing import Iterator
 import numpy as np
 import pytest
 
-from pipeline import parallel, synthetic, video_io
-from pipeline.observer import StageCollector
-from pipeline.source import ArraySource, PrefetchedSource, one_pass
+from pipeline.runtime import parallel, video_io
+from pipeline.evaluation import synthetic
+from pipeline.runtime.observer import StageCollector
+from pipeline.runtime.source import ArraySource, PrefetchedSource, one_pass
 from pipeline.stabilize import StabilizeConfig, stabilize_source
 
 # --- ordered_map ------------------------------------------------------------------------------------------

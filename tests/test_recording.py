@@ -15,10 +15,11 @@ from ffviz import entities as ent, trace, visual
 from ffviz.recorder import FILLED_BY_BASE, WEIGHTS_STEP, RerunRecorder
 from ffviz.rrd import Recording
 from ffviz.viewer import rerun_executable
-from pipeline import geometry, synthetic
-from pipeline.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC
-from pipeline.neighbours import WarpedNeighbour
-from pipeline.observer import Observers, StageCollector, Stamp
+from pipeline import geometry
+from pipeline.evaluation import synthetic
+from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC
+from pipeline.stages.neighbours import WarpedNeighbour
+from pipeline.runtime.observer import Observers, StageCollector, Stamp
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 N_FRAMES = 30
@@ -316,7 +317,7 @@ def test_deblur_results_are_recorded_duck_typed(tmp_path):
 
 
 def test_real_deblur_results_are_recorded(tmp_path):
-    deblur = pytest.importorskip("pipeline.deblur", reason="pipeline/deblur.py not there yet")
+    deblur = pytest.importorskip("pipeline.stages.deblur", reason="pipeline/stages/deblur.py not there yet")
     video = synthetic.generate(synthetic.SyntheticConfig(width=160, height=96, n_frames=4, seed=1, moving_object=False,
                                                          blurred_frames=(2,), blur_length_px=6.0))
     everywhere = np.ones((96, 160), bool)

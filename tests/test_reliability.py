@@ -33,7 +33,8 @@ import pytest
 
 from ffviz import cli
 from ffviz.bench import measured_argv, read_measurement
-from pipeline import synthetic, video_io
+from pipeline.evaluation import synthetic
+from pipeline.runtime import video_io
 from tests.test_video_io import mux_sine
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,6 +1,6 @@
-"""Camera motion when a large object moves in front of the camera (pipeline/motion.py, choose_background).
+"""Camera motion when a large object moves in front of the camera (pipeline/stages/motion.py, choose_background).
 
-Ground truth: pipeline.synthetic's person figure made 0.9 x 1.0 of the frame (about 40 % of the picture, the
+Ground truth: pipeline.evaluation.synthetic's person figure made 0.9 x 1.0 of the frame (about 40 % of the picture, the
 rest is background on either side), walking 10-25 px a frame across a shaken camera's view. RANSAC alone keeps
 whichever motion has more tracks, often the figure's; the output then shakes by the figure's steps.
 """
@@ -10,11 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline import geometry, motion, smoothing
-from pipeline.observer import NullObserver, null_progress
-from pipeline.source import ArraySource
+from pipeline import geometry
+from pipeline.stages import motion, smoothing
+from pipeline.runtime.observer import NullObserver, null_progress
+from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, estimate_motion
-from pipeline.synthetic import SyntheticConfig, generate
+from pipeline.evaluation.synthetic import SyntheticConfig, generate
 
 
 def motion_and_worst_error(video, config: motion.MotionConfig) -> tuple[np.ndarray, float]:
@@ -81,7 +82,7 @@ def test_an_ignore_mask_video_keeps_features_off_the_figure(tmp_path, monkeypatc
     """A mask video of the figure (white where it is, frame by frame): every feature on it is dropped, so even
     RANSAC alone (the automatic choice switched off) follows the background."""
     import cv2
-    from pipeline import synthetic
+    from pipeline.evaluation import synthetic
 
     monkeypatch.setattr(motion, "choose_background", lambda estimate, *args: estimate)
     video = generate(SyntheticConfig(n_frames=30, object_kind="person", person_size=(0.9, 1.0), seed=2,
@@ -111,7 +112,7 @@ def test_ignore_boxes_drop_the_features_inside_them_while_active():
 def test_ignore_options_on_the_command_line_and_their_errors(tmp_path, capsys):
     import cv2
     from ffviz import cli
-    from pipeline import synthetic
+    from pipeline.evaluation import synthetic
 
     video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=12, seed=3,
                                                          blurred_frames=()))

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline import synthetic
-from pipeline.observer import StageCollector
-from pipeline.source import ArraySource
+from pipeline.evaluation import synthetic
+from pipeline.runtime.observer import StageCollector
+from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pipeline import geometry
-from pipeline.smoothing import SmoothingConfig, gaussian_weights, smooth
+from pipeline.stages.smoothing import SmoothingConfig, gaussian_weights, smooth
 
 FPS = 30.0
 

@@ -17,8 +17,10 @@ from conftest import real_clip
 from ffviz import cli, entities as ent
 from ffviz.recorder import RerunRecorder
 from ffviz.rrd import Recording
-from pipeline import geometry, synthetic, video_io
-from pipeline.observer import Observers, StageCollector
+from pipeline import geometry
+from pipeline.evaluation import synthetic
+from pipeline.runtime import video_io
+from pipeline.runtime.observer import Observers, StageCollector
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 

@@ -1,4 +1,4 @@
-"""Ground-truth checks of the synthetic shaky-video generator (pipeline/synthetic.py)."""
+"""Ground-truth checks of the synthetic shaky-video generator (pipeline/evaluation/synthetic.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.synthetic import (
+from pipeline.evaluation.synthetic import (
     SyntheticConfig,
     SyntheticVideo,
     apply_blur,

@@ -1,4 +1,4 @@
-"""pipeline.video_io: probing, counting, reading and writing, on small videos made here with PyAV."""
+"""pipeline.runtime.video_io: probing, counting, reading and writing, on small videos made here with PyAV."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import ConfigError, InputError, OutputError
-from pipeline.video_io import (
+from pipeline.runtime.video_io import (
     Encoding,
     VideoReader,
     VideoWriter,
@@ -497,7 +497,7 @@ def test_undecodable_packet_is_replaced_by_the_previous_frame_with_a_warning(tmp
 
 
 def test_pipeline_io_does_not_import_viewers():
-    code = "import sys, pipeline.video_io; sys.exit(bool({'rerun', 'matplotlib'} & set(sys.modules)))"
+    code = "import sys, pipeline.runtime.video_io; sys.exit(bool({'rerun', 'matplotlib'} & set(sys.modules)))"
     root = Path(__file__).resolve().parents[1]
     assert subprocess.run([sys.executable, "-c", code], cwd=root).returncode == 0
 

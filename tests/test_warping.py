@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.warping import blacken, largest_crop, warp, warp_frame
+from pipeline.stages.warping import blacken, largest_crop, warp, warp_frame
 
 W, H = 160, 90
 

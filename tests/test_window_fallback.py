@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.fallback import nearest_known, smooth_fill
-from pipeline.window import sliding_window
+from pipeline.stages.fallback import nearest_known, smooth_fill
+from pipeline.runtime.window import sliding_window
 
 
 def test_window_gives_every_item_with_its_clipped_neighbours_and_holds_few_items():

@@ -18,11 +18,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from pipeline import deblur  # noqa: E402
-from pipeline.observer import NullObserver  # noqa: E402
-from pipeline.source import ArraySource  # noqa: E402
+from pipeline.stages import deblur  # noqa: E402
+from pipeline.runtime.observer import NullObserver  # noqa: E402
+from pipeline.runtime.source import ArraySource  # noqa: E402
 from pipeline.stabilize import StabilizeConfig, stabilize, stabilize_source  # noqa: E402
-from pipeline.synthetic import SyntheticConfig, generate  # noqa: E402
+from pipeline.evaluation.synthetic import SyntheticConfig, generate  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]

@@ -17,7 +17,8 @@ from typing import Sequence
 
 import numpy as np
 
-from pipeline import geometry, l1_path
+from pipeline import geometry
+from pipeline.stages import l1_path
 from pipeline.errors import ConfigError
 
 DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
@@ -31,7 +32,7 @@ TRIPOD_STILL = 0.05  # px or degrees a frame: a tripod path moving more than thi
 class SmoothingConfig:
     radius: int = DEFAULT_RADIUS  # k: neighbours on each side
     sigma: float | None = None  # Gaussian sigma in frames; None -> sqrt(k) as in the thesis
-    path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/l1_path.py); "tripod": held
+    path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/stages/l1_path.py); "tripod": held
     l1: l1_path.L1PathConfig = l1_path.L1PathConfig()  # its bounds, when path is "l1"
     horizon_lock: bool = False  # the output keeps the rotation of each shot's first frame (any path)
 

@@ -13,7 +13,7 @@ there is not used (``common`` says where it is valid).
 Method choice: DIS, preset "fast" since the speed work of issue 6 (below: why not "medium", the most accurate
 per unit of time). Flow accuracy (``benchmarks/local_flow_choice.py``; 640x360; end-point error in px on
 ``common``). "photo": 4 skimage photographs, each resampled along 2 known smooth flows (affine 0.5-3 px plus a
-1 px sinusoid), noise sigma 1.5, black invalid bands on both images. "video": pipeline.synthetic frames
+1 px sinusoid), noise sigma 1.5, black invalid bands on both images. "video": pipeline.evaluation.synthetic frames
 t = 10, 20, 30 and t' = t-3, t-1, t+2 warped into t's intended view by the exact transforms, so the truth is zero
 on the background and the object's own 11-35 px motion on its interior. ms: one local_flow call, 2 CPU cores
 (loaded; relative figures are what matter)::
@@ -34,7 +34,7 @@ across motion edges). ``dis_preset="fast", dis_finest_scale=0`` roughly halves t
 time (~1 s per 1080p pair against ~0.24 s), worth it only where seams must be sub-0.2 px.
 
 Yet what completion makes of the flow hardly depends on that accuracy: each pixel takes the candidate whose
-warp best explains its surroundings, out of four neighbours' (pipeline/completion.py), and the mosaic fills
+warp best explains its surroundings, out of four neighbours' (pipeline/stages/completion.py), and the mosaic fills
 most of the missing area. PSNR of the completed pixels, 32 frames, fast minus medium: synthetic coffee -0.11,
 rocket +0.35, astronaut +0.26, chelsea -0.01 dB; crops of linyihaolyh -0.11, vplab_C -0.34, selh_tasc -0.47,
 small-shaky-5 -0.08 dB (mean -0.06, real clips -0.25), while DIS runs 3x faster (10 against 29 ms on a
@@ -56,7 +56,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.errors import ConfigError
-from pipeline.mosaic import intensity
+from pipeline.stages.mosaic import intensity
 
 METHODS: tuple[str, ...] = ("dis", "farneback", "lk")
 DIS_PRESETS = {
@@ -112,7 +112,7 @@ def mean_abs_difference(target_intensity: np.ndarray, target_valid: np.ndarray, 
 
     The thesis sums; the mean is used because a sum grows with the overlap, so it would rank a neighbour
     that shares much of the frame (usually the nearest, most useful one) below one that barely overlaps.
-    pipeline/completion.py evaluates it on a subsampled grid of each neighbour.
+    pipeline/stages/completion.py evaluates it on a subsampled grid of each neighbour.
     """
     common = target_valid & neighbour_valid
     if np.count_nonzero(common) < min_common_fraction * common.size:

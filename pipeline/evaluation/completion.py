@@ -26,11 +26,11 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from pipeline import warping
-from pipeline.observer import NullObserver, Stamp
-from pipeline.source import ArraySource
+from pipeline.stages import warping
+from pipeline.runtime.observer import NullObserver, Stamp
+from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
-from pipeline.synthetic import SyntheticVideo
+from pipeline.evaluation.synthetic import SyntheticVideo
 
 TELEA_RADIUS = 3.0
 METHODS = ("ours", "mosaic+telea", "telea")

@@ -12,7 +12,7 @@ the mean of the two middle neighbours' colours). So the filled intensity is exac
 intensities, as eq. 22 states, and the colour is an observed one, never a per-channel mix of different frames.
 
 Threshold choice (T = 100, i.e. the neighbours' intensities spread by ~10 grey levels). Measured on
-pipeline.synthetic clips (coffee, astronaut, chelsea; 640x360, 30 frames so the object moves ~13 px per frame;
+pipeline.evaluation.synthetic clips (coffee, astronaut, chelsea; 640x360, 30 frames so the object moves ~13 px per frame;
 frames 8, 14, 20 with neighbours t-5..t+5 warped into t's intended view by the exact transforms, each
 neighbour optionally misregistered by a random 0.5 or 1 px shift; missing: 120 px border bands plus a band
 through the object). "static acc": accepted fraction of judged pixels no frame of the window shows the object

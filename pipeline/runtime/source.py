@@ -12,7 +12,7 @@ from typing import Iterator, Protocol, Sequence
 
 import numpy as np
 
-from pipeline import parallel, video_io
+from pipeline.runtime import parallel, video_io
 from pipeline.errors import InputError
 
 
@@ -73,7 +73,7 @@ class ArraySource:
 
 
 class PrefetchedSource:
-    """Another source's frames decoded ahead on a background thread (pipeline/parallel.py).
+    """Another source's frames decoded ahead on a background thread (pipeline/runtime/parallel.py).
 
     Decoder warnings travel with the frame they were raised by, so ``drain_warnings`` answers exactly what the
     wrapped source answers at the same point of a pass.

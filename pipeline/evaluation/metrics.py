@@ -102,7 +102,7 @@ no pair has synthesized pixels (a crop), as are the means then.
 
 Reading
 -------
-Both videos are read only through ``pipeline.video_io.VideoReader``, one streaming pass each: frames
+Both videos are read only through ``pipeline.runtime.video_io.VideoReader``, one streaming pass each: frames
 are upright RGB (the container's rotation tag applied, as the stabilizer reads its input and writes
 its output untagged), and an undecodable frame is stood in for by the previous one, so frame counts
 agree with the stabilizer's.
@@ -128,7 +128,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from pipeline import video_io
+from pipeline.runtime import video_io
 from pipeline.errors import ConfigError, InputError
 
 _MIN_INLIERS = 8
@@ -205,7 +205,7 @@ class StabilizationMetrics:
 
 
 # ----------------------------------------------------------------------------------------------
-# Reading: only through pipeline.video_io, so both videos are seen upright (the container's rotation
+# Reading: only through pipeline.runtime.video_io, so both videos are seen upright (the container's rotation
 # tag applied) exactly as the stabilizer saw its input and wrote its output, and a frame that does not
 # decode is stood in for as in the stabilizer (frame count and timing kept). Read raw, a phone clip
 # tagged "rotate 90" is landscape while its upright output is portrait: the output was squeezed onto

@@ -1,9 +1,9 @@
-"""The per-pixel work of deblurring (pipeline/deblur.py), compiled: coverage of a warped neighbour as row spans,
+"""The per-pixel work of deblurring (pipeline/stages/deblur.py), compiled: coverage of a warped neighbour as row spans,
 INTER_AREA and INTER_LINEAR resampling tables, the low-resolution alignment error and its rejection bands, the
 blend of eq. 30, and the blurriness maps' one-pass filtering.
 
 Every function here reproduces a plain array computation (a whole-frame warp and mask, cv2.resize, a dilation)
-that tests/test_deblur.py compares it with; pipeline/deblur.py's docstring says why each one exists.
+that tests/test_deblur.py compares it with; pipeline/stages/deblur.py's docstring says why each one exists.
 """
 
 from __future__ import annotations
@@ -592,7 +592,7 @@ class Contributions:
 
 @njit(cache=True, nogil=True)
 def structure_products(target: np.ndarray, other: np.ndarray, weight: np.ndarray, out: np.ndarray) -> None:
-    """The per-cell terms whose window means StructureGuard (pipeline/deblur.py) needs, into ``out`` (8, h, w):
+    """The per-cell terms whose window means StructureGuard (pipeline/stages/deblur.py) needs, into ``out`` (8, h, w):
     o, o^2, t o, then t times o one cell to the left, right, above and below (clamped at the edge: o(p - d) for
     d = (0, 1), (0, -1), (1, 0), (-1, 0) in (row, column)), and the coverage weight."""
     height, width = target.shape

@@ -22,11 +22,12 @@ from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from pipeline import smoothing, video_io
+from pipeline.stages import smoothing
+from pipeline.runtime import video_io
 from pipeline import stabilize as stab
 from pipeline.errors import InputError
-from pipeline.observer import NullObserver, Observer, Stamp, null_progress
-from pipeline.source import FileSource
+from pipeline.runtime.observer import NullObserver, Observer, Stamp, null_progress
+from pipeline.runtime.source import FileSource
 
 Mapper = Callable[[Callable[..., Any], Sequence[tuple]], Iterable[Any]]
 OPEN_END = sys.maxsize  # the last segment reads to the end, whatever the header's frame count said

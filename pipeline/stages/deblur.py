@@ -19,7 +19,7 @@ neighbours, so transferred pixels are resampled once and completed pixels are sh
 ``deblur`` equals whole-frame warps and full-resolution maps within float32 rounding, except on a neighbour's
 1-px coverage boundary (tests/test_deblur.py): coverage is solved per row from the transform, E stays at low
 resolution and is upsampled only where it can cross the threshold, and one pass over the rows blends every
-neighbour (pipeline/deblur_kernels.py). Choices and measurements: docs/deblurring.md.
+neighbour (pipeline/stages/deblur_kernels.py). Choices and measurements: docs/deblurring.md.
 """
 
 from __future__ import annotations
@@ -32,12 +32,13 @@ from typing import Mapping, Sequence
 import cv2
 import numpy as np
 
-from pipeline import deblur_kernels as kernels
-from pipeline import geometry, smoothing, warping
+from pipeline.stages import deblur_kernels as kernels
+from pipeline import geometry
+from pipeline.stages import smoothing, warping
 from pipeline.errors import ConfigError
-from pipeline.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
-from pipeline.mosaic import INTENSITY_WEIGHTS, intensity
-from pipeline.window import PerFrame
+from pipeline.stages.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
+from pipeline.stages.mosaic import INTENSITY_WEIGHTS, intensity
+from pipeline.runtime.window import PerFrame
 
 # Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
 # and scale with the frame height (blur, in pixels, grows with the resolution).

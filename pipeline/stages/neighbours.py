@@ -6,10 +6,10 @@ and at p + F(p) for the local warp (eq. 25). Warping every neighbour over the wh
 warps each) was 17% of full mode's time at 640x360 and grows with the frame's area; here each look warps or
 samples just what it needs, straight from the original frame. Whole frames (``rgb``, ``valid``) are warped on
 first use, once; deblurring warps only the colours itself and works out coverage from ``other_from_stab``
-(pipeline/deblur.py).
+(pipeline/stages/deblur.py).
 
 A pixel is valid when every bilinear tap of its sample lies inside the original frame (as the target's own
-missing mask in pipeline/warping.py).
+missing mask in pipeline/stages/warping.py).
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import Callable, Mapping
 import cv2
 import numpy as np
 
-from pipeline import smoothing, warping
-from pipeline.window import PerFrame
+from pipeline.stages import smoothing, warping
+from pipeline.runtime.window import PerFrame
 
 _MAP_COLUMNS = 4096
 TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within this of the edge weighs nothing

@@ -31,7 +31,7 @@ Flows and motion inpainting run only in boxes around the pixels that need a loca
 ``flow_margin_px`` (``_work_boxes``: the strips of a border missing on several sides keep separate boxes).
 
 Priority: the thesis ranks neighbours by the eq. 23 alignment error and notes that the nearest frames are
-usually the best aligned. Measured on pipeline.synthetic clips, the global alignment errors of all neighbours
+usually the best aligned. Measured on pipeline.evaluation.synthetic clips, the global alignment errors of all neighbours
 are within noise of each other while the nearest frames are by far the best local-warp sources (smallest
 object displacement, least occlusion change), so neighbours are taken nearest in time first, the alignment
 error breaking ties between t-k and t+k (``neighbour_order`` reports that order).
@@ -48,9 +48,10 @@ import cv2
 import numpy as np
 from numba import njit
 
-from pipeline import fallback, fmm, geometry, local_flow, mosaic
+from pipeline.stages import fallback, fmm, local_flow, mosaic
+from pipeline import geometry
 from pipeline.errors import ConfigError
-from pipeline.neighbours import WarpedNeighbour, shrink, shrink_all, shrink_any
+from pipeline.stages.neighbours import WarpedNeighbour, shrink, shrink_all, shrink_any
 
 # What filled each pixel (CompletionResult.source).
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK = 0, 1, 2, 3
@@ -303,7 +304,7 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
     source = np.where(missing, SOURCE_FALLBACK, SOURCE_ORIGINAL).astype(np.uint8)
     filled_by = np.zeros((height, width), np.int16)
     ys, xs = geometry.mask_pixels(missing)  # the pixels to fill
-    # Each neighbour is looked at only where needed (pipeline/neighbours.py): first at the missing pixels.
+    # Each neighbour is looked at only where needed (pipeline/stages/neighbours.py): first at the missing pixels.
     at_missing = [n.at(ys, xs) for n in neighbours]
     mosaic_result = mosaic.mosaic_from_samples(
         target, missing, np.stack([c for c, _ in at_missing]) if neighbours else None,

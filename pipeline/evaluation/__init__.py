@@ -1,0 +1,1 @@
+"""Judging the output: stability metrics, synthetic ground truth, completion and dynamic-scene scores."""
