@@ -111,3 +111,30 @@ def test_pipeline_imports_neither_rerun_nor_matplotlib():
         for name in _imported_names(module, path) if name.split(".")[0] in ("rerun", "matplotlib")
     )
     assert not offenders, offenders
+
+
+MAX_MODULE_DOCSTRING_LINES = 25  # issue 21: what, which equations, invariants, why; measurements live in docs/
+
+
+def long_module_docstrings(root: Path, limit: int = MAX_MODULE_DOCSTRING_LINES) -> dict[str, int]:
+    """File (relative to root's parent) -> line count, for every module under ``root`` whose docstring runs past
+    ``limit`` lines (``ast.get_docstring``: indentation cleaned, the text between the quotes)."""
+    found = {}
+    for path in sorted(root.rglob("*.py")):
+        docstring = ast.get_docstring(ast.parse(path.read_text(), filename=str(path)))
+        if docstring and len(docstring.splitlines()) > limit:
+            found[str(path.relative_to(root.parent))] = len(docstring.splitlines())
+    return found
+
+
+def test_long_module_docstrings_are_found(tmp_path):
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "short.py").write_text('"""' + "\n".join(["line"] * 25) + '"""\n')
+    (package / "long.py").write_text('"""' + "\n".join(["line"] * 26) + '"""\nx = 1\n')
+    assert long_module_docstrings(package) == {"pkg/long.py": 26}
+
+
+def test_module_docstrings_in_pipeline_stay_short():
+    too_long = long_module_docstrings(REPO / "pipeline")
+    assert not too_long, f"module docstrings over {MAX_MODULE_DOCSTRING_LINES} lines (move measurements to docs/): {too_long}"

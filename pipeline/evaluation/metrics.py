@@ -1,119 +1,26 @@
-"""Objective stabilization measures: Liu et al. 2013 as the common evaluation scripts compute them, plus ours.
+"""Objective stabilization measures: Liu et al. 2013 as the common evaluation script computes them, plus ours.
 
-Liu, Yuan, Tan, Sun, "Bundled camera paths for video stabilization", SIGGRAPH 2013, defined three
-measures; later papers compute them with variants of one script, published with DIFRINT
-(github.com/jinsc37/DIFRINT, ``metrics.py``; the reference followed here) and copied into later
-evaluation code (a ``StabEval`` class with the same SURF/FFT code; a variant that resizes frames to
-640x480, caches SIFT features and filters distortion to [0.5, 1]). This module follows that script,
-with the deviations listed below, and adds a jitter measure in pixels that works on a single video.
-Everything is written from the definitions; no code is copied.
+Liu, Yuan, Tan, Sun, "Bundled camera paths for video stabilization" (SIGGRAPH 2013) defined cropping ratio,
+distortion and stability; this module follows the script published with DIFRINT (github.com/jinsc37/DIFRINT,
+``metrics.py``), written from the definitions (no code copied) and without its known bugs, and adds two measures
+of ours: residual jitter in pixels (one video) and the flicker of synthesized pixels (input against output).
 
-Feature matching (every pair of frames below)
----------------------------------------------
-Each frame is converted to grey and downscaled so its longer side is at most ``max_side``
-(INTER_AREA). SIFT (``cv2.SIFT_create(n_features)``; ORB with ``feature="orb"``, or when SIFT is
-missing) runs once per frame; its keypoints are reused for every pair the frame takes part in.
-Descriptors are matched by brute force, k=2, and kept by Lowe's ratio test (``ratio``, 0.75; the
-script uses 0.7). With more than ``min_matches`` (10, as the script) survivors a homography is fitted
-by RANSAC (``ransac_px`` pixels of the downscaled image, 3.0; the script uses 5.0 at 640x480), then
-expressed in full-resolution pixels. A pair *fails* (no homography) when there are too few matches,
-fewer than 8 RANSAC inliers, or the fit is degenerate (non-finite, or det of its 2x2 part <= 0).
-A pair of *neighbouring* frames of one video also fails when the step is implausible as camera
-motion (a scene cut matched to something bogus): rotation over 30 degrees, scale change beyond
-1.5x either way (sqrt of the singular values' product), or singular-value ratio below 0.7. Input-
-output pairs have no such gate (the scripts have none), so a distorting output is not hidden.
+* Matching: SIFT once per frame on a copy whose longer side is ``max_side``, Lowe's ratio test, a RANSAC
+  homography; a pair fails on too few matches or inliers, a degenerate fit, or (consecutive frames of one
+  video) a step implausible as camera motion (``_plausible_step``).
+* ``compare``, input frame i against output frame i (``H_i``: input -> output pixels, ``A = H_i[:2, :2]``):
+  cropping ``min(1, 1 / sqrt|det A|)``, distortion ``sigma_min(A) / sigma_max(A)``, black border fraction.
+* Stability (``stability_score``): the share of the accumulated path's spectral energy (translation magnitude,
+  rotation angle) in frequencies 1-5, DC excluded.
+* Residual jitter (``residual_jitter``): RMS of the frame-centre trajectory minus its Gaussian low-pass
+  (sigma = half a second; each end padded by point reflection about a line fitted to it).
+* Synthesized-pixel flicker (``synthesized_change``): mean |O_t - warp(O_{t-1})| over output pixels outside
+  the input frame's mapped outline (a seam band excluded), divided by the same mean over real pixels.
 
-SIFT in OpenCV doubles its input before building the scale space, so a 320-pixel image is analysed
-on a 640-pixel base: ``max_side=320`` (the default) keeps sub-pixel accuracy (on real 640x360
-frames warped by known transforms: about 0.12 px of full-resolution error, against 0.06 px when
-detecting at 640) at a quarter of the detection cost.
-
-Per-frame measures (``compare``: input frame i against output frame i)
-----------------------------------------------------------------------
-``H_i`` maps input pixels to output pixels (``x_out ~ H_i x_in``, findHomography(src=input,
-dst=output) as in the script). With ``A_i = H_i[:2, :2]`` (H normalised so ``H[2,2] = 1``):
-
-* scale ``s_i = sqrt(|det A_i|)``; **cropping** ``c_i = min(1, 1 / s_i)``. An output that shows the
-  input zoomed in by 1.25 (a 20 % crop each way) gives ``c_i = 0.8``. ``cropping_ratio`` is the mean
-  of ``c_i`` over frames whose pair did not fail. The script uses ``sqrt(H00 * H11)``, which equals
-  ``s_i`` without rotation or shear but falls with rotation (cos^2); the determinant does not.
-  Each frame's value is computed once: the DIFRINT script re-inverts its whole running sequence every
-  frame (``CR_seq = concatenate((1/CR_seq, [s]))``), which flips the earlier values; we do not.
-* **distortion** ``d_i = sigma_min(A_i) / sigma_max(A_i)`` (singular values; 1 = no anisotropic
-  scale or shear). The script takes the ratio of the eigenvalues of ``A_i``, which are complex under
-  rotation; singular values are the robust equivalent. ``distortion`` = min over frames (the worst,
-  as the script reports), ``distortion_mean`` = mean. No outlier filtering (some scripts drop
-  ``d_i`` outside [0.5, 1]).
-* **black_fraction**: fraction of output pixels whose R, G and B are all ``<= black_level`` (7, i.e.
-  below 8) and that belong to a 4-connected region of such pixels touching the image border (so dark
-  content inside the picture is not counted), averaged over all output frames. Level 7 rather than
-  3 because H.264 (yuv420p) blurs the edge of a black border: on a 640x360 test with 10.8 % black,
-  CRF 18 read 10.1 % at level 3 and 10.5 % at level 7; dark real clips read <= 0.02 % at level 7.
-
-Stability score (one video; ``compare`` reports the output's, ``input`` holds the input's)
-------------------------------------------------------------------------------------------
-``M_t`` (t = 1..N-1) maps frame t-1 to frame t (identity when the pair fails). The path is
-accumulated as ``P_t = M_t @ P_{t-1}``, ``P_0 = I`` (frame 0 to frame t; the script multiplies on
-the right, which is the same for translations only), each normalised so ``P[2,2] = 1``. From
-``P_1 .. P_{N-1}`` (N-1 samples, as the script) two 1-D signals are taken:
-
-* translation ``T_t = sqrt(P_t[0,2]^2 + P_t[1,2]^2)`` pixels: the magnitude, as the script does
-  (not x and y separately);
-* rotation ``R_t = atan2(P_t[1,0], P_t[0,0])`` in degrees, unwrapped. The script uses
-  ``atan2(P00, P11)``, which is 45 degrees for any rotation and uniform scale (a bug); we use the
-  rotation angle of the path.
-
-For each signal x of length K: ``E = |FFT(x)|^2``; drop the DC bin; keep the first ``(K-1)//2``
-remaining bins (frequencies 1 .. (K-1)//2); score = energy of the first five kept bins (frequencies
-1..5) / energy of all kept bins. A constant signal (no energy) scores 1. ``stability_translation``
-and ``stability_rotation`` are reported separately (the script prints them and their mean).
-Beware: a perfectly still output shows only the estimation noise, which is white, and scores low.
-
-Residual jitter (ours; one video)
----------------------------------
-From the same ``M_t``: the centre ``c`` of the frame moves by ``d_t = M_t(c) - c`` (pixels,
-perspective divide included) and the frame turns by ``a_t = atan2(M_t[1,0], M_t[0,0])``; failed pairs
-contribute 0. The trajectory is the running sum, ``X_t = sum_{k<=t} d_k``, ``theta_t = sum a_k``,
-with ``X_0 = 0`` (N samples). Each coordinate is low-passed by a Gaussian of sigma = fps/2 frames
-(half a second; kernel truncated at 4 sigma). Before filtering each end is padded by point reflection
-(``2 a - x_k``) about ``a``, the value at that end of a least-squares line through the end's
-``round(sigma)`` samples (half a second). So a constant-velocity pan passes unchanged to the ends
-(plain reflection would read a pan of v px per frame as about 0.8 * sigma * v of jitter at each end),
-and, unlike reflecting about the end sample itself, one shaken end frame does not anchor the padding.
-The high-passed residual ``h = x - lowpass(x)`` gives
-``residual_jitter_px = sqrt(mean_t(hx_t^2 + hy_t^2))`` and
-``residual_jitter_deg = sqrt(mean_t(htheta_t^2))`` in degrees. Motion slower than about a second
-stays in the low-pass; hand shake lands in the residual. Input and output jitter are comparable.
-
-Flicker of synthesized pixels (ours; ``compare``)
-------------------------------------------------
-Output pixels outside input frame t warped into output frame t (the input's outline mapped by
-``H_t``) are *synthesized* (completed from other frames); inside, *real*. A band of ``seam_px`` (2)
-on either side of the outline counts as neither, so an error of ``H_t`` of a pixel or two does not mix
-the classes. Output frame t-1 is warped onto frame t by ``M_t`` (bilinear); the change of a pixel is
-``|O_t - warp(O_{t-1})|`` in grey levels 0-255. Only pixels inside warped frame t-1 count: *real*
-ones are real in both frames, *synthesized* ones are synthesized in either and in neither's seam band
-(a completed pixel that pops when the real content comes back is flicker too). A pair is skipped when
-``M_t``, ``H_t`` or ``H_{t-1}`` failed or when fewer than 0.5 % of the pixels count as synthesized.
-``synth_change_mean`` and ``real_change_mean`` are pooled over the clip's pairs;
-``synth_flicker_ratio`` is their quotient: about 1 when the completed areas are as steady as the
-real picture (both see the same codec noise and alignment error), above when they flicker. NaN when
-no pair has synthesized pixels (a crop), as are the means then.
-
-Reading
--------
-Both videos are read only through ``pipeline.runtime.video_io.VideoReader``, one streaming pass each: frames
-are upright RGB (the container's rotation tag applied, as the stabilizer reads its input and writes
-its output untagged), and an undecodable frame is stood in for by the previous one, so frame counts
-agree with the stabilizer's.
-
-Failures
---------
-``failed_pairs`` of ``StabilizationMetrics`` counts the failed input-output pairs plus the failed
-consecutive output pairs; ``input.failed_pairs`` counts the failed consecutive input pairs. A failed
-input-output pair is left out of cropping and distortion (NaN when all fail; ``to_dict`` writes
-NaN as None). An output whose frame size differs from the input's is resized to the input's size for
-matching, so the crop is measured against the input's frame.
+Invariants: both videos are read only through ``video_io.VideoReader`` (upright, rotation tags applied; an
+undecodable frame stood in for by the previous one, so frame counts agree with the stabilizer's); a failed
+pair is left out of every mean, never counted as a value (NaN when all fail; ``to_dict`` writes None).
+Every definition in full, with where and why it departs from the script: docs/metrics.md.
 """
 
 from __future__ import annotations
@@ -181,7 +88,7 @@ class VideoMotionStats:
 
 @dataclass
 class StabilizationMetrics:
-    """Comparison of an input video and its stabilized output (see the module docstring)."""
+    """Comparison of an input video and its stabilized output (definitions: docs/metrics.md)."""
 
     cropping_ratio: float
     distortion: float

@@ -1,40 +1,26 @@
 """Full-frame video completion (thesis chapter 4): the ordered chain that fills a stabilized frame's missing area.
 
-1. consistent mosaicing (eqs. 20-22): static areas, median of neighbours that agree;
-2. for neighbours in priority order (eq. 23): local flow over the common area, motion inpainting of
-   that flow into the missing area by Fast Marching (eq. 24), local-warp mosaicing through it (eq. 25);
-3. a smooth last-resort fill for what no neighbour covers.
+1. consistent mosaicing (eqs. 20-22, ``mosaic``): static areas, median of neighbours that agree;
+2. local-warp mosaicing: for the ``max_warp_neighbours`` nearest neighbours, local flow over the common area
+   (``local_flow``), motion inpainting of that flow into the missing area by Fast Marching (eq. 24, ``fmm``)
+   and a candidate sample through it (eq. 25);
+3. a smooth last-resort fill (``fallback``) for what no neighbour covers.
 
-Every neighbour arrives already warped into the target's stabilized coordinates, with its valid mask.
+Invariants: every neighbour arrives already warped into the target's stabilized coordinates, with its valid
+mask; pixels outside ``missing`` are never changed; every missing pixel leaves filled, and ``source`` says by
+which stage.
 
-Local-warp mosaicing, judged locally
-------------------------------------
-The thesis fills each pixel from the first neighbour (in priority order) whose warp reaches it. A single
-neighbour's inpainted flow is a guess, though: where a moving object's flow bleeds into the background, or a
-neighbour shows an object occluding the pixel, that neighbour's sample is simply wrong, and nothing checks it.
-Here each of the ``max_warp_neighbours`` nearest neighbours yields a *candidate* for every pixel its warp
-reaches, and a pixel takes the candidate whose warp best explains the visible surroundings it continues: eq. 23
-made local (``_LocalError``: the mean intensity difference after the warp over the known pixels around the
-pixel's nearest known pixel). A static sample that no other neighbour shows (an object that only passed there
-in that frame) ranks after every confirmed one. (A first version with the thesis's first-neighbour rule
-scored 2-4 dB below the mosaic+Telea baseline on the synthetic moving-object scenes: object flow painted
-background.)
+Eq. 23 made local: the thesis fills a pixel from the first neighbour whose warp reaches it, but one
+neighbour's inpainted flow is a guess (object flow bleeds into background, an occluder hides the pixel). So
+each pixel takes the candidate whose warp best explains the known surroundings it continues (``_LocalError``:
+mean intensity difference after the warp around the pixel's nearest known pixel); a static sample no other
+neighbour confirms ranks after every confirmed one. The same evidence corrects the mosaic where its static
+assumption fails (a moving object shown as background by every neighbour it has left): a clearly moving
+candidate (``moving_px``) that beats the static scene by ``mosaic_check_margin`` replaces the mosaic pixel.
 
-The same evidence corrects the mosaic where its static assumption fails: a moving object inside the missing
-area is shown as background by every neighbour the object has left, so the variance test passes and paints
-background (a "ghost" hole in the object). Where a clearly moving candidate (``moving_px``) explains the
-surroundings better than the static scene by ``mosaic_check_margin``, it replaces the mosaic pixel. The cost:
-object flow propagated just past the object's edge can replace correct background beside it
-(tests/test_completion.py measures both sides).
-
-Flows and motion inpainting run only in boxes around the pixels that need a local warp, grown by
-``flow_margin_px`` (``_work_boxes``: the strips of a border missing on several sides keep separate boxes).
-
-Priority: the thesis ranks neighbours by the eq. 23 alignment error and notes that the nearest frames are
-usually the best aligned. Measured on pipeline.evaluation.synthetic clips, the global alignment errors of all neighbours
-are within noise of each other while the nearest frames are by far the best local-warp sources (smallest
-object displacement, least occlusion change), so neighbours are taken nearest in time first, the alignment
-error breaking ties between t-k and t+k (``neighbour_order`` reports that order).
+Neighbours are taken nearest in time first, eq. 23's global alignment error breaking ties between t-k and
+t+k (``neighbour_order``); flows and inpainting run only in boxes around the pixels that need a local warp
+(``_work_boxes``, grown by ``flow_margin_px``). Why, with the measurements: docs/completion.md.
 """
 
 from __future__ import annotations

@@ -1,63 +1,26 @@
-"""Motion inpainting by Fast Marching (thesis 4.2.3 and 4.3; Telea 2004, Matsushita et al. 2006).
+"""Motion inpainting by Fast Marching (thesis 4.2.3 and 4.3, eqs. 24, 26-27; Telea 2004).
 
 A dense flow F is known on part of the frame (``known``); the missing area is filled pixel by pixel in
-increasing distance T from the known area, each new pixel taking a weighted mean (eq. 24) of the flow
-of pixels that already have one. Flow layout: (H, W, 2) float32, [..., 0] = x (right), [..., 1] = y
-(down); the neighbour frame's pixel at p + F(p) corresponds to frame t's pixel p.
+increasing distance T from the known area, each new pixel taking the weighted mean (eq. 24) of the flow of
+pixels that already have one. Flow layout: (H, W, 2) float32, [..., 0] = x (right), [..., 1] = y (down); the
+neighbour frame's pixel at p + F(p) corresponds to frame t's pixel p.
 
-Fast Marching (eqs. 26-27, Fig. 19)
------------------------------------
-Pixels are KNOWN (T fixed), BAND (in a min-heap on T) or INSIDE (not reached yet). Known pixels start
-with T = 0; the region's pixels next to them enter the band. The head of the band is frozen (KNOWN) and
-its 4-neighbours get T from the upwind discretisation of |grad T| = 1 using only frozen neighbours:
-with a, b the smaller frozen T along x and along y (a <= b),
-    T = (a + b + sqrt(2 - (a - b)^2)) / 2   if b - a < 1,   else a + 1,
-which is the smallest of Telea's four quadrant solutions. Each missing pixel is frozen once, in
-non-decreasing T, and that is the order in which it is filled. T approximates the Euclidean distance to
-the nearest known pixel centre (first-order scheme): exact behind straight axis-aligned fronts; a pixel
-with two orthogonal known neighbours gets 0.71 instead of 1 (-29 %), one diagonal to a lone front pixel
-1.71 instead of 1.41 (+21 %); mean errors on the test shapes are 0.02-0.11 px (tests/test_fmm.py).
-The heap is a binary heap on flat arrays with lazy deletion (a pixel whose T drops is pushed again; the
-stale entry is skipped when popped): 1.5x faster here than numba's ``heapq`` on a list of tuples, and
-as fast as an indexed heap with decrease-key, which needs more code.
+Fast Marching (eqs. 26-27): pixels are KNOWN (T fixed), BAND (min-heap on T, lazy deletion) or INSIDE. The
+band's head is frozen and its 4-neighbours get T from the upwind solution of |grad T| = 1 over frozen
+neighbours only: with a <= b the smaller frozen T along x and along y,
+    T = (a + b + sqrt(2 - (a - b)^2)) / 2   if b - a < 1,   else a + 1.
+Invariants: each missing pixel is frozen once, in non-decreasing T, and filled in that order; pixels neither
+known nor in the region are walls (never entered, never used); only the region's bounding box grown by
+radius + 1 is processed, and that crop is exact.
 
-Pixels that are neither known nor in the region are walls: never entered, never used. Only the
-bounding box of the region grown by radius + 1 is processed (crop, then paste back); the crop is exact.
-
-Weights (eq. 24)
-----------------
-A visited pixel p takes F(p) = sum_q w(p, q) F(q) / sum_q w(p, q) over pixels q with 0 < |p - q| <= radius
-that already have a flow (known, or filled earlier in the marching order), with
-
-    w(p, q) = 1 / |p - q|  *  1 / (||I'(p + F(q)) - I'(q + F(q))||_2 + eps)
-
-I' is the neighbour frame (RGB, 0..255, bilinear). q + F(q) is q's match in the neighbour; p + F(q) is
-where p's match would be if p moved like q, so the colour factor is large when "p moves like q" agrees
-with the neighbour's colours. A sample is usable when its whole 2x2 bilinear footprint lies on the
-image and in the neighbour's valid area; when either sample of a pair is not, that pair keeps the
-distance factor alone (colour factor 1, which is a perfect colour match at the default eps = 1).
-``use_colour=False`` drops the colour factor everywhere.
-
-The geometric factor is Telea's distance term in its milder form 1/|p - q| (1/|p - q|^2 measured the
-same on the tests). Telea's direction term (p - q) . grad T and level-set term are left out: both
-favour q straight "upstream" of p, which for flow only strengthens a straight extrusion across object
-boundaries, while the colour factor is what should decide whose motion p shares.
-
-Limits (measured on the scenes of tests/test_fmm.py): eq. 24 has no gradient term (Telea's eq. 7 has), so the fill is a
-zero-order extension: an affine field of slope g px/px drifts by up to g (T + 2) px at depth T. Colour
-steering across the front (a boundary slanted to the marching direction) works when each object's
-colour is nearly uniform: 1/(d + 1) gives a same-coloured neighbour at most ~200x the weight of one
-across a strong colour edge (less as soon as the object has texture), a pixel on the slant has few
-same-coloured predecessors, and the small mixing compounds row after row. With flat colours a
-0.5 px/row slant is followed for 60 rows (91 % of the wedge right at radius 4, 94 % at 5); with +-2 grey
-levels of shading on the objects that drops to 33-46 %, with +-5 to 7 % (measured at radius 5).
-
-Radius
-------
-H(p) is the disc of radius 4 (48 pixels). Completion quality hardly depends on it (PSNR of the completed
-pixels, 32 frames, 8 scenes of the issue-6 check: 4 synthetic, 4 crops of real clips, radius 4 minus 5:
-+0.17, 0, +0.05, -0.04, +0.27, -0.07, 0, 0 dB; radius 3: mean +0.11 dB but the wedge above drops to 81 %),
-while the cost of eq. 24 grows with the disc's area: radius 4 does 40 % less work than 5.
+Eq. 24: F(p) = sum_q w(p, q) F(q) / sum_q w(p, q) over q with 0 < |p - q| <= radius that have a flow, and
+    w(p, q) = 1 / |p - q|  *  1 / (||I'(p + F(q)) - I'(q + F(q))||_2 + eps),
+I' the neighbour frame (RGB 0..255, bilinear). p + F(q) is where p's match would be if p moved like q, so the
+colour factor favours the q whose motion the neighbour's colours confirm for p. A pair whose 2x2 bilinear
+footprint leaves the image or the neighbour's valid area keeps the distance factor alone (``use_colour=False``:
+everywhere). Telea's direction and level-set terms are left out: they favour q straight upstream of p, which for
+flow only strengthens extrusion across object boundaries. Without a gradient term the fill is a zero-order
+extension. Accuracy of T, limits and the radius: docs/completion.md.
 """
 
 from __future__ import annotations

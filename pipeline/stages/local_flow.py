@@ -2,49 +2,22 @@
 
 After the global warp, a neighbour t' seen in frame t's stabilized coordinates still differs from frame t by
 its *local* motion: moving objects, parallax and residual misregistration. Motion inpainting (4.2.3) needs that
-motion as a dense field on the area both frames cover; this module computes it, and orders the neighbours by
-how well they are aligned so that the best ones fill the missing area first.
+motion as a dense field on the area both frames cover: ``local_flow`` computes it, ``mean_abs_difference`` the
+eq. 23 alignment error by which neighbours are ordered.
 
-Flow is computed on intensity images (0.30 R + 0.59 G + 0.11 B). The invalid pixels of each image (black in the
-warped frames) are first filled, so the flow method does not lock onto a black edge: with the other image's
-pixels where it has them, and by push-pull (normalised pyramid interpolation) where neither has. The flow
-there is not used (``common`` says where it is valid).
+Flow is computed on intensity images (0.30 R + 0.59 G + 0.11 B) by DIS (``dis_preset``, "fast" by default;
+Farneback and the thesis's sparse Lucas-Kanade on a grid remain as ``method`` values). The invalid pixels of each
+image (black in the warped frames) are first filled, so the flow does not lock onto a black edge: with the other
+image's pixels where it has them (their texture keeps DIS's patches matching across the hole boundary, where
+motion inpainting starts), and by push-pull (normalised pyramid interpolation) where neither has. Invariant: the
+flow is valid only on ``common`` (both images valid, eroded by ``common_erosion_px``); ``reliable`` is the part
+of it whose flow lands on the neighbour's content. Inside ``focus``, regions the flow leaves badly explained are
+matched again by a translation search (``_rescue_large_motions``: DIS's pyramid loses fast objects).
 
-Method choice: DIS, preset "fast" since the speed work of issue 6 (below: why not "medium", the most accurate
-per unit of time). Flow accuracy (``benchmarks/local_flow_choice.py``; 640x360; end-point error in px on
-``common``). "photo": 4 skimage photographs, each resampled along 2 known smooth flows (affine 0.5-3 px plus a
-1 px sinusoid), noise sigma 1.5, black invalid bands on both images. "video": pipeline.evaluation.synthetic frames
-t = 10, 20, 30 and t' = t-3, t-1, t+2 warped into t's intended view by the exact transforms, so the truth is zero
-on the background and the object's own 11-35 px motion on its interior. ms: one local_flow call, 2 CPU cores
-(loaded; relative figures are what matter)::
-
-    method                 photo EPE  p95   video bg  object   ms
-    dis ultrafast            0.546   1.41    0.242    1.13      9
-    dis fast (default)       0.460   1.06    0.147    0.96     13
-    dis medium               0.242   0.65    0.075    0.17     27
-    dis fast, finest 0       0.147   0.43    0.062    0.05     78
-    dis medium, finest 0     0.148   0.44    0.062    0.04    186
-    farneback                0.564   2.04    0.278    3.64     68
-    lk on an 8 px grid       0.193   0.54    0.262    0.39     58
-
-DIS medium is the knee in flow accuracy: 2-6x more accurate than the faster presets; 2-2.5x faster than
-Farneback (which also loses the larger displacements) and than the thesis' sparse LK, which is a little better
-on the smooth photo flows but 2-3.5x worse on the video's background and object (an 8 px grid interpolated
-across motion edges). ``dis_preset="fast", dis_finest_scale=0`` roughly halves the error again for ~3x the
-time (~1 s per 1080p pair against ~0.24 s), worth it only where seams must be sub-0.2 px.
-
-Yet what completion makes of the flow hardly depends on that accuracy: each pixel takes the candidate whose
-warp best explains its surroundings, out of four neighbours' (pipeline/stages/completion.py), and the mosaic fills
-most of the missing area. PSNR of the completed pixels, 32 frames, fast minus medium: synthetic coffee -0.11,
-rocket +0.35, astronaut +0.26, chelsea -0.01 dB; crops of linyihaolyh -0.11, vplab_C -0.34, selh_tasc -0.47,
-small-shaky-5 -0.08 dB (mean -0.06, real clips -0.25), while DIS runs 3x faster (10 against 29 ms on a
-400x300 box), a sixth of full mode's time at 640x360. So "fast" is the default; "medium" stays a config
-value (``dis_preset``) for quality-first use.
-
-Filling the holes before DIS (medium; same photo cases; EPE within 24 px of the target's holes / elsewhere):
-the other image's pixels, then push-pull 0.29 / 0.24; push-pull of each image's own pixels 0.99 / 0.28;
-left black 8.7 / 0.42. The other image's texture keeps DIS's patches matching across the hole boundary,
-which is exactly where motion inpainting starts from.
+Why DIS "fast" and not the more accurate "medium": each pixel takes the candidate whose warp best explains its
+surroundings out of four neighbours', and the mosaic fills most of the missing area, so the completed pixels
+hardly depend on flow accuracy while "fast" runs 3x faster. Flow accuracy of every method and the completion
+PSNR behind this choice: docs/completion.md (``benchmarks/local_flow_choice.py``).
 """
 
 from __future__ import annotations

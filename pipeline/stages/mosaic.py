@@ -1,45 +1,23 @@
 """Mosaicing with the consistency constraint (thesis 4.2.1, eqs. 20-22).
 
-Each neighbour t' has already been warped into frame t's stabilized coordinates (the caller composes S_t'
-with the inter-frame chain) and comes with its validity mask. For every missing pixel p of frame t covered
-by n >= ``min_neighbours`` neighbours, eq. 20 gives the variance of their intensities
-(0.30 R + 0.59 G + 0.11 B, 0..255), with the n-1 denominator and the mean of eq. 21. A low variance means the
+Each neighbour t' arrives already warped into frame t's stabilized coordinates (the caller composes S_t' with
+the inter-frame chain) with its validity mask. For every missing pixel p of frame t covered by
+n >= ``min_neighbours`` neighbours, eq. 20 gives the variance of their intensities (0.30 R + 0.59 G + 0.11 B,
+0..255) with the n-1 denominator and eq. 21's mean. A low variance (below ``variance_threshold``) means the
 neighbours agree, i.e. p shows static, well-registered scene, and p is filled with the median (eq. 22); a high
 variance means a moving object or misregistration, and p stays missing for motion inpainting.
 
-The median of colour pixels: the colour of the neighbour whose *intensity* is the median (for an even count,
-the mean of the two middle neighbours' colours). So the filled intensity is exactly the median of the
-intensities, as eq. 22 states, and the colour is an observed one, never a per-channel mix of different frames.
+The median of colour pixels is the colour of the neighbour whose *intensity* is the median (for an even count,
+the mean of the two middle neighbours' colours). So the filled intensity is exactly eq. 22's median, and the
+colour is an observed one, never a per-channel mix of different frames.
 
-Threshold choice (T = 100, i.e. the neighbours' intensities spread by ~10 grey levels). Measured on
-pipeline.evaluation.synthetic clips (coffee, astronaut, chelsea; 640x360, 30 frames so the object moves ~13 px per frame;
-frames 8, 14, 20 with neighbours t-5..t+5 warped into t's intended view by the exact transforms, each
-neighbour optionally misregistered by a random 0.5 or 1 px shift; missing: 120 px border bands plus a band
-through the object). "static acc": accepted fraction of judged pixels no frame of the window shows the object
-on; "obj rej": rejected fraction of the object's footprint at t; PSNR of all accepted pixels against the truth::
+Threshold 100 (intensities spread by ~10 grey levels) keeps ~97 % of the static pixels at half a pixel of
+misregistration while leaving ~98 % of a moving object's footprint to motion inpainting: a larger one accepts
+objects (ghosts), a smaller one hands textured static edges on to the costlier local warp (measurements:
+docs/completion.md).
 
-    variance (intensity^2)    static p50  p90   p99  | object footprint p10  p50
-    exact registration           0.1      0.5    6   |                  560  2140
-    0.5 px misregistration       1.0     21    259   |                  555  2137
-    1.0 px misregistration       3.8     75    851   |                  587  2176
-
-      T  | exact: static acc obj rej PSNR | 0.5 px: static acc obj rej PSNR | 1 px: static acc obj rej PSNR
-     25  |           0.998    0.988  40.8 |            0.911    0.990  40.0 |          0.787    0.991  38.6
-     50  |           0.999    0.983  39.7 |            0.950    0.985  38.7 |          0.865    0.986  37.2
-    100  |           0.999    0.974  38.4 |            0.973    0.977  37.4 |          0.920    0.977  35.8
-    200  |           1.000    0.961  36.9 |            0.987    0.962  35.9 |          0.955    0.964  34.4
-    400  |           1.000    0.929  34.8 |            0.995    0.930  34.0 |          0.977    0.934  32.8
-    800  |           1.000    0.845  31.8 |            0.999    0.846  31.3 |          0.989    0.853  30.5
-
-T = 100 keeps ~97% of the static pixels at half a pixel of registration error while leaving ~98% of the moving
-object's footprint to motion inpainting; a larger T starts accepting the object (ghosts), a smaller one gains
-1-3 dB on the accepted pixels only by handing many more static ones (textured edges) on to the costlier
-motion-inpainting stage.
-
-Speed: only the missing pixels are gathered, as (n, m) samples, so the cost follows the missing area, not the
-frame; the median uses pairwise rank counting (faster than argsort along a short axis). With 10 neighbours and
-10% of the frame missing: ~7 ms at 640x360, ~90 ms at 1920x1080 (2 loaded CPU cores); ~1 ms when nothing is
-missing.
+Only the missing pixels are gathered, as (n, m) samples, so the cost follows the missing area, not the frame;
+the median uses pairwise rank counting (faster than argsort along a short axis).
 """
 
 from __future__ import annotations
