@@ -113,14 +113,17 @@ class _Keep(NullObserver):
         self.curr_from_prev: list[np.ndarray] = []
         self.orig_from_stab: np.ndarray | None = None
 
-    def on_stage(self, stage, stamp, result) -> None:
-        if stage == "motion":
-            self.curr_from_prev.append(result.curr_from_prev)
-        elif stage == "smoothing":
-            self.orig_from_stab = result.orig_from_stab
-        elif stage == "completion":
-            self.completed[stamp.index] = (cv2.cvtColor(result.frame, cv2.COLOR_RGB2GRAY), result.missing,
-                                           result.source)
+    def on_motion(self, stamp, estimate) -> None:
+        self.curr_from_prev.append(estimate.curr_from_prev)
+
+    def on_path(self, plan) -> None:
+        self.orig_from_stab = plan.smoothing.orig_from_stab
+
+    def on_frame(self, result) -> None:
+        done = result.completion
+        if done is not None:
+            self.completed[result.stamp.index] = (cv2.cvtColor(done.frame, cv2.COLOR_RGB2GRAY), done.missing,
+                                                  done.source)
 
 
 def _flicker_by_source(path: Path) -> None:

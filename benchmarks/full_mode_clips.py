@@ -40,26 +40,28 @@ class _FullModeAudit(NullObserver):
         self.sources = np.zeros(4)
         self.cross_cut = 0
 
-    def on_stage(self, stage, stamp, result) -> None:
-        if stage == "smoothing":
-            n = len(result.orig_from_stab)
-            self.segment_of = np.searchsorted(result.segment_starts, np.arange(n), side="right") - 1
-        elif stage == "input":
-            self.input_dark.append(float(np.mean(result.rgb.max(axis=2) <= DARK)))
-        elif stage == "completion":
-            missing = result.missing
-            self.missing.append(float(missing.mean()))
-            if missing.any():
-                dark = result.frame[missing].max(axis=1) <= DARK
-                self.black.append(max(float(dark.mean()) - self.input_dark[stamp.index], 0.0))
-                codes = result.source[missing]
-                self.sources += np.bincount(codes, minlength=4)[:4]
-            # Every neighbour completion was handed (mosaic and local warp alike).
-            used = set(result.neighbour_order) | {fill.offset for fill in result.fills}
-            t = stamp.index
-            segment = self.segment_of[t]
-            self.cross_cut += sum(1 for offset in used
-                                  if not 0 <= t + offset < len(self.segment_of) or self.segment_of[t + offset] != segment)
+    def on_path(self, plan) -> None:
+        n = len(plan.smoothing.orig_from_stab)
+        self.segment_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(n), side="right") - 1
+
+    def on_frame(self, frame) -> None:
+        self.input_dark.append(float(np.mean(frame.input.rgb.max(axis=2) <= DARK)))
+        result = frame.completion
+        if result is None:
+            return
+        missing = result.missing
+        self.missing.append(float(missing.mean()))
+        if missing.any():
+            dark = result.frame[missing].max(axis=1) <= DARK
+            self.black.append(max(float(dark.mean()) - self.input_dark[frame.stamp.index], 0.0))
+            codes = result.source[missing]
+            self.sources += np.bincount(codes, minlength=4)[:4]
+        # Every neighbour completion was handed (mosaic and local warp alike).
+        used = set(result.neighbour_order) | {fill.offset for fill in result.fills}
+        t = frame.stamp.index
+        segment = self.segment_of[t]
+        self.cross_cut += sum(1 for offset in used
+                              if not 0 <= t + offset < len(self.segment_of) or self.segment_of[t + offset] != segment)
 
 
 def main(argv: list[str] | None = None) -> int:

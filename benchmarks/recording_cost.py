@@ -45,8 +45,14 @@ class TimedRecorder(RerunRecorder):
     def on_start(self, info, config) -> None:
         self._timed(super().on_start, info, config)
 
-    def on_stage(self, stage, stamp, result) -> None:
-        self._timed(super().on_stage, stage, stamp, result)
+    def on_motion(self, stamp, estimate) -> None:
+        self._timed(super().on_motion, stamp, estimate)
+
+    def on_path(self, plan) -> None:
+        self._timed(super().on_path, plan)
+
+    def on_frame(self, result) -> None:
+        self._timed(super().on_frame, result)
 
     def on_warning(self, stamp, message) -> None:
         self._timed(super().on_warning, stamp, message)

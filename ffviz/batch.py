@@ -20,7 +20,8 @@ from typing import Any, Callable, Iterator, Sequence
 from pipeline.runtime import segments, video_io
 from pipeline import stabilize as stab
 from pipeline.errors import ConfigError, FFVizError, InputError
-from pipeline.runtime.observer import NullObserver, Observers, Stamp
+from pipeline.results import FrameResult
+from pipeline.runtime.observer import NullObserver, Observers
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".webm", ".mts", ".mpg", ".mpeg")
 MARKERS = ".ffviz-batch"  # folder in OUTDIR: one JSON marker per finished output
@@ -57,9 +58,8 @@ class FrameDigests(NullObserver):
     def __init__(self) -> None:
         self.digests: list[str] = []
 
-    def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
-        if stage == "output":
-            self.digests.append(frame_digest(result))
+    def on_frame(self, result: FrameResult) -> None:
+        self.digests.append(frame_digest(result.output))
 
 
 def frame_digest(rgb: Any) -> str:

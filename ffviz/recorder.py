@@ -31,10 +31,11 @@ from ffviz.blueprint import default_blueprint
 from pipeline import geometry
 from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
 from pipeline.stages.motion import MotionEstimate
-from pipeline.runtime.observer import Stamp
-from pipeline.stages.smoothing import SmoothingResult
+from pipeline.results import FrameResult, PathPlan, Stamp
 from pipeline.runtime.video_io import Frame
-from pipeline.stages.warping import WarpResult
+from pipeline.stages.deblur import DeblurResult
+from pipeline.stages.smoothing import SmoothingResult
+from pipeline.stages.warping import CropWindow, WarpResult
 
 RecordLevel = Literal["summary", "full"]
 RECORD_LEVELS: tuple[str, ...] = ("summary", "full")
@@ -340,14 +341,18 @@ class RerunRecorder:
                 + [(f"from neighbour {o:+d}", c) for o, c in ((-5, _offset_colour(-5)), (5, _offset_colour(5)))],
                 "deblurred pixel from"),
         }
-    def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
-        handler = getattr(self, f"_on_{stage}", None)
-        if handler is not None:
-            self._submit(self._do_stage, handler, stamp, result)
+    def on_motion(self, stamp: Stamp, estimate: MotionEstimate) -> None:
+        self._submit(self._timed, self._on_motion, stamp, estimate)
 
-    def _do_stage(self, handler, stamp: Stamp | None, result: Any) -> None:
+    def on_path(self, plan: PathPlan) -> None:
+        self._submit(self._timed, self._on_path, plan)
+
+    def on_frame(self, result: FrameResult) -> None:
+        self._submit(self._timed, self._on_frame, result)
+
+    def _timed(self, handler, *args) -> None:
         started = time.perf_counter()
-        handler(stamp, result)
+        handler(*args)
         self.seconds_logging += time.perf_counter() - started
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:
@@ -385,7 +390,24 @@ class RerunRecorder:
                 origins=estimate.prev_points[::step], vectors=(estimate.curr_points - estimate.prev_points)[::step],
                 colors=colours[::step]))
 
-    def _on_smoothing(self, stamp: None, result: SmoothingResult) -> None:
+    def _on_path(self, plan: PathPlan) -> None:
+        self._on_smoothing(plan.smoothing)
+        if plan.crop is not None:
+            self._on_crop(plan.crop)
+
+    def _on_frame(self, result: FrameResult) -> None:
+        stamp = result.stamp
+        if result.input is not None:
+            self._on_input(stamp, result.input)
+        if result.warp is not None:
+            self._on_warp(stamp, result.warp)
+        if result.completion is not None:
+            self._on_completion(stamp, result.completion)
+        if result.deblur is not None:
+            self._on_deblur(stamp, result.deblur)
+        self._on_output(stamp, result.output)
+
+    def _on_smoothing(self, result: SmoothingResult) -> None:
         frames = np.arange(len(result.orig_from_stab))
         times = np.array([self._times.get(int(t), 0.0) for t in frames])
         indexes = [rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
@@ -406,7 +428,7 @@ class RerunRecorder:
                                                  "frames: not traced", level=rr.TextLogLevel.WARN), static=True)
             self._set_traced([t for t in self._trace_requested if t < n])
 
-    def _on_crop(self, stamp: None, crop: Any) -> None:
+    def _on_crop(self, crop: CropWindow) -> None:
         """--mode crop: the window of the stabilized frame that becomes the output (static, drawn over it)."""
         self._crop = crop
         width, height = self._size
@@ -471,14 +493,13 @@ class RerunRecorder:
         classes[warped] = (FILLED_BY_BASE + result.filled_by[warped]).astype(np.uint8)
         return classes
 
-    def _on_deblur(self, stamp: Stamp, result: Any) -> None:
-        """A deblurring result (duck-typed: frame, before, blurriness, neighbours, weights)."""
+    def _on_deblur(self, stamp: Stamp, result: DeblurResult) -> None:
         self._trace(stamp, "deblurred", result.frame)
         self._set_time(stamp)
-        neighbours = tuple(getattr(result, "neighbours", None) or ())
+        neighbours = tuple(result.neighbours)
         self.rec.log(ent.DEBLUR_BLURRINESS, rr.Scalars(float(result.blurriness)))
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.Scalars(len(neighbours)))
-        refused = getattr(result, "refused", None)
+        refused = result.refused
         self.rec.log(ent.DEBLUR_REFUSED, rr.Scalars(float(refused.mean()) if refused is not None else 0.0))
         if self.level != "full":
             return
@@ -495,7 +516,7 @@ class RerunRecorder:
         # Sparse video streams (only sharpened frames; cleared in between, which hides them there).
         self._frame(ent.DEBLUR_BEFORE, stamp, result.before)
         self._frame(ent.DEBLUR_AFTER, stamp, result.frame)
-        weights = getattr(result, "weights", None)
+        weights = result.weights
         if weights is not None:
             # uint8 (255 = 1): a float32 map is 4x the bytes and does not compress; 1/255 is plenty to look at.
             quantised = np.clip(np.asarray(weights, np.float32) * ent.DEBLUR_WEIGHTS_SCALE + 0.5, 0, 255).astype(np.uint8)

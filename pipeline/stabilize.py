@@ -1,59 +1,31 @@
-"""The orchestrator: two streaming passes over the video.
-
-Pass 1 decodes every frame once and estimates the motion to its predecessor, keeping only the previous
-(downscaled) frame and one 3x3 matrix per frame. The path is smoothed as a whole (it is tiny). Pass 2
-decodes again, warps, and encodes. Memory is bounded by the frame window, not by the video's length.
-Every stage's result goes to the observer.
+"""Stabilize a video: pass 1 estimates the motion of every frame pair (chapter 3), the path is planned as a whole
+(pipeline/chain.py), pass 2 renders every frame through the per-frame chain and writes it. ``run_passes`` is
+the one orchestration; ``stabilize_source`` runs both passes in this process (threads), pipeline/runtime/
+segments.py runs them segment by segment through a mapper (serial or Ray). Memory is bounded by the frame
+window, not by the video's length: pass 1 keeps the previous downscaled frame and one 3x3 matrix per frame.
 """
 
 from __future__ import annotations
 
-import itertools
-import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Iterator, Literal
+from typing import Callable, Iterable, Iterator
 
 import cv2
 import numpy as np
 
-from pipeline.stages import completion, deblur, motion, neighbours, smoothing, warping
-from pipeline.runtime import parallel, video_io
-from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, one_pass
-from pipeline.runtime.window import Windowed, sliding_window
+from pipeline.chain import FrameChain, plan_path, render_frames
+from pipeline.config import OUTPUT_MODES, OutputMode, StabilizeConfig
 from pipeline.errors import ConfigError, InputError
-from pipeline.runtime.observer import NullObserver, Observer, ProgressFactory, Stamp, is_null, null_progress
+from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
+from pipeline.runtime import parallel, video_io
+from pipeline.runtime.observer import NullObserver, Observer, ProgressFactory, is_null, null_progress
+from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, one_pass
+from pipeline.stages import motion, warping
 
-OutputMode = Literal["full", "none", "crop"]
-OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
-
-
-@dataclass(frozen=True)
-class StabilizeConfig:
-    mode: OutputMode = "full"
-    motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
-    smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
-    completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
-    deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
-
-    def __post_init__(self) -> None:
-        if self.mode not in OUTPUT_MODES:
-            raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
-
-
-@dataclass
-class MotionPass:
-    """What pass 1 leaves for pass 2: one transform and one status per frame."""
-
-    curr_from_prev: np.ndarray  # (N, 3, 3)
-    statuses: list[str]
-    times_s: list[float]
-    warnings: list[tuple[int | None, str]]
-
-    @property
-    def cuts(self) -> list[int]:
-        return [t for t, status in enumerate(self.statuses) if status == "cut"]
+__all__ = ["OUTPUT_MODES", "OutputMode", "StabilizeConfig", "MotionPass", "PathPlan", "FrameResult", "FrameChain",
+           "StabilizeReport", "estimate_motion", "run_passes", "stabilize", "stabilize_source"]
 
 
 @dataclass
@@ -127,7 +99,7 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
                 if estimate.warning:
                     warnings.append((frame.index, estimate.warning))
                     observer.on_warning(stamp, estimate.warning)
-                observer.on_stage("motion", stamp, estimate)
+                observer.on_motion(stamp, estimate)
                 transforms.append(estimate.curr_from_prev)
                 statuses.append(estimate.status)
                 times.append(frame.time_s)
@@ -210,17 +182,6 @@ def _forward_warnings(source: FrameSource, stamp: Stamp | None, observer: Observ
         observer.on_warning(stamp, message)
 
 
-def output_transforms(orig_from_stab: np.ndarray, mode: str, width: int, height: int,
-                      ) -> tuple[np.ndarray, warping.CropWindow | None, str | None]:
-    """orig_from_out per frame for the output mode, the crop window, and a warning if cropping gave up."""
-    if mode != "crop":
-        return orig_from_stab, None, None
-    window = warping.largest_crop(orig_from_stab, width, height)
-    if window is None:
-        return orig_from_stab, None, "no area is common to all stabilized frames: crop disabled, borders left black"
-    return orig_from_stab @ window.stab_from_out, window, None
-
-
 def stabilize(input_path: Path | str, output_path: Path | str | None, config: StabilizeConfig = StabilizeConfig(), *,
               observer: Observer | None = None, progress: ProgressFactory = null_progress,
               overwrite: bool = False, encoding: video_io.Encoding = video_io.Encoding(),
@@ -242,182 +203,76 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
                      observer: Observer | None = None, progress: ProgressFactory = null_progress,
                      encoding: video_io.Encoding = video_io.Encoding(), workers: int | None = None,
                      ) -> StabilizeReport:
-    """The two passes over any frame source; the output (if any) must already be checked."""
+    """Both passes in this process over any frame source (``workers`` threads); the output must be checked."""
     observer = observer or NullObserver()
     workers = parallel.default_workers() if workers is None else max(int(workers), 1)
     if workers > 1:
         source = PrefetchedSource(source)  # decoding overlaps the per-frame work
-    info = source.info
-    observer.on_start(info, config)
+    keep = not is_null(observer)
 
+    def motion_pass() -> MotionPass:
+        return estimate_motion(source, config.motion, observer=observer, progress=progress,
+                               total=source.info.frame_count or None, workers=workers)
+
+    def frames(plan: PathPlan) -> Iterator[FrameResult]:
+        description = "pass 2/2: warp + complete + encode" if config.completing else "pass 2/2: warp + encode"
+        bar = progress(description, plan.motion.n_frames)
+        try:
+            for result in render_frames(source, plan, config, keep_intermediates=keep, workers=workers):
+                yield result
+                bar.update()
+        finally:
+            bar.close()
+
+    return run_passes(source.info, output_path, config, motion_pass, frames, observer=observer, encoding=encoding)
+
+
+def run_passes(info: video_io.VideoInfo, output_path: Path | None, config: StabilizeConfig,
+               motion_pass: Callable[[], MotionPass], frames: Callable[[PathPlan], Iterable[FrameResult]], *,
+               observer: Observer, encoding: video_io.Encoding) -> StabilizeReport:
+    """The one orchestration of a run, whoever executes its passes.
+
+    ``motion_pass()``: pass 1 (its per-frame warnings already shown to ``observer``); ``frames(plan)``: pass 2's
+    results in frame order. This function plans the path, shows every result and warning to ``observer``,
+    writes the frames with the input's audio (nothing is left at ``output_path`` if anything fails), and
+    reports."""
+    observer.on_start(info, config)
     started = time.perf_counter()
-    motion_pass = estimate_motion(source, config.motion, observer=observer, progress=progress,
-                                  total=info.frame_count or None, workers=workers)
-    n_frames = len(motion_pass.statuses)
-    if n_frames == 1:
-        add_warning(motion_pass.warnings, observer, "only one frame: there is no motion to smooth, written as it is")
-    smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
-                                width=info.width, height=info.height)
-    observer.on_stage("smoothing", None, smoothed)
-    orig_from_out, crop, crop_warning = output_transforms(smoothed.orig_from_stab, config.mode, info.width, info.height)
-    warnings = list(motion_pass.warnings)
-    for message in smoothing.path_warnings(smoothed, config.smoothing):
-        add_warning(warnings, observer, message)
-    if crop_warning:
-        add_warning(warnings, observer, crop_warning)
-    if crop is not None:
-        observer.on_stage("crop", None, crop)
+    motion_result = motion_pass()
+    plan = plan_path(motion_result, config, info.width, info.height)
+    warnings = list(motion_result.warnings)
+    observer.on_path(plan)
+    for message in plan.warnings:
+        _add_warning(warnings, observer, message)
     seconds_motion = time.perf_counter() - started
 
     started = time.perf_counter()
-    for message in render(source, output_path, motion_pass.curr_from_prev, smoothed, orig_from_out, config,
-                          observer=observer, progress=progress, total=n_frames, encoding=encoding,
-                          workers=workers):
-        add_warning(warnings, observer, message)
+    writer = None
+    if output_path is not None:
+        writer = video_io.VideoWriter(output_path, like=info, audio_from=info.path if info.has_audio else None,
+                                      encoding=encoding)
+    try:
+        for result in frames(plan):
+            observer.on_frame(result)
+            if writer is not None:
+                writer.write(result.output, pts=result.pts, time_s=result.stamp.time_s)
+        if writer is not None:
+            writer.close()
+            for message in writer.warnings:  # odd size padded, timestamps nudged, audio cut short
+                _add_warning(warnings, observer, message)
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
     report = StabilizeReport(
-        input_path=info.path, output_path=output_path, n_frames=n_frames, mode=config.mode, crop=crop,
-        cuts=motion_pass.cuts, fallbacks=[t for t, s in enumerate(motion_pass.statuses) if s == "fallback"],
-        warnings=warnings, seconds_motion=seconds_motion, seconds_render=time.perf_counter() - started,
+        input_path=info.path, output_path=output_path, n_frames=motion_result.n_frames, mode=config.mode,
+        crop=plan.crop, cuts=motion_result.cuts, fallbacks=motion_result.fallbacks, warnings=warnings,
+        seconds_motion=seconds_motion, seconds_render=time.perf_counter() - started,
     )
     observer.on_finish(report)
     return report
 
 
-def add_warning(sink: list[tuple[int | None, str]], observer: Observer, message: str) -> None:
+def _add_warning(sink: list[tuple[int | None, str]], observer: Observer, message: str) -> None:
     sink.append((None, message))
     observer.on_warning(None, message)
-
-
-def render(source: FrameSource, output_path: Path | None, curr_from_prev: np.ndarray,
-            smoothed: smoothing.SmoothingResult, orig_from_out: np.ndarray, config: StabilizeConfig, *,
-            observer: Observer, progress: ProgressFactory, total: int,
-            encoding: video_io.Encoding = video_io.Encoding(), frames: range | None = None, workers: int = 1,
-            ) -> list[str]:
-    """Pass 2; returns the writer's warnings (odd size padded, timestamps nudged, audio cut short).
-
-    ``frames``: render only these (a segment); the window still reads ``radius`` frames either side of the
-    range, so each frame sees the neighbours it sees in a whole-video run. ``workers``: frames rendered at
-    once (threads); frames reach the observer and the writer in order either way, identical."""
-    full = config.mode == "full"
-    deblurring = config.deblur.enabled and config.deblur.radius > 0
-    radius = max(config.completion.radius if full else 0, config.deblur.radius if deblurring else 0)
-    renderer = _FrameRenderer(config, curr_from_prev, smoothed, orig_from_out,
-                              keep_events=not is_null(observer))
-    bar = progress("pass 2/2: warp + complete + encode" if full else "pass 2/2: warp + encode", total)
-    info = source.info
-    audio_from = info.path if info.has_audio else None
-    writer = video_io.VideoWriter(output_path, like=info, audio_from=audio_from,
-                                  encoding=encoding) if output_path else None
-    try:
-        with one_pass(source) as decoded:
-            windows = sliding_window(decoded, radius)
-            if frames is not None:
-                windows = (w for w in itertools.takewhile(lambda w: w.centre.index < frames.stop, windows)
-                           if w.centre.index >= frames.start)
-            for rendered in parallel.ordered_map(renderer, windows, workers):
-                for stage, stamp, result in rendered.events:
-                    observer.on_stage(stage, stamp, result)
-                if writer is not None:
-                    writer.write(rendered.output, pts=rendered.frame.pts, time_s=rendered.frame.time_s)
-                bar.update()
-        if writer is not None:
-            writer.close()
-            return writer.warnings
-        return []
-    except BaseException:
-        if writer is not None:
-            writer.abort()
-        raise
-    finally:
-        bar.close()
-
-
-@dataclass
-class _RenderedFrame:
-    frame: video_io.Frame  # the input frame
-    output: np.ndarray  # the frame to write
-    events: list[tuple[str, Stamp, object]]  # (stage, stamp, result) for the observer, in stage order
-
-
-class _FrameRenderer:
-    """Pass 2 for one frame and its window: warp, complete (full mode), deblur. Safe to call from several
-    threads at once: it only reads the window and the transforms (the deblur energy cache is locked)."""
-
-    def __init__(self, config: StabilizeConfig, curr_from_prev: np.ndarray, smoothed: smoothing.SmoothingResult,
-                 orig_from_out: np.ndarray, *, keep_events: bool) -> None:
-        self.config = config
-        self.curr_from_prev = curr_from_prev
-        self.orig_from_stab = smoothed.orig_from_stab
-        self.orig_from_out = orig_from_out
-        self.segment_of = np.searchsorted(smoothed.segment_starts, np.arange(len(self.orig_from_stab)),
-                                          side="right") - 1
-        self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
-        self.downscaled: neighbours.Downscaled | None = None  # frames at completion's flow resolution
-        self._downscaled_lock = threading.Lock()
-        self.keep_events = keep_events
-
-    def _downscaled(self, shape: tuple[int, int], t: int) -> neighbours.Downscaled | None:
-        """The frames at local flow's working resolution (each shrunk once for all the frames it is a neighbour
-        of); None when that is full resolution."""
-        scale = completion.flow_scale(shape, self.config.completion)
-        if scale >= 1.0:
-            return None
-        size = (max(round(shape[1] * scale), 1), max(round(shape[0] * scale), 1))
-        with self._downscaled_lock:
-            if self.downscaled is None or self.downscaled.size != size:
-                self.downscaled = neighbours.Downscaled(size)
-            downscaled = self.downscaled
-        # A few frames of slack: frames are rendered a little out of order on several threads.
-        downscaled.forget_before(t - self.config.completion.radius - 8)
-        return downscaled
-
-    def __call__(self, window: Windowed[video_io.Frame]) -> _RenderedFrame:
-        config = self.config
-        frame = window.centre
-        stamp = Stamp(frame.index, frame.time_s)
-        events: list[tuple[str, Stamp, object]] = []
-
-        def emit(stage: str, result: object) -> None:
-            if self.keep_events:
-                events.append((stage, stamp, result))
-
-        # Decoding is deterministic, so pass 2 sees pass 1's frames; guard anyway.
-        t = min(frame.index, len(self.orig_from_stab) - 1)
-        emit("input", frame)
-        # Crop mode writes its own warp (by orig_from_out): the stabilized frame is made there only to be shown.
-        stabilized = None
-        if config.mode != "crop" or self.keep_events:
-            stabilized = warping.warp_frame(frame.rgb, self.orig_from_stab[t])
-            emit("warp", stabilized)
-        # Neighbours from the same shot only: nothing is carried across a scene cut.
-        same_shot = {n.index: n.rgb for n in window.neighbours.values()
-                     if n.index < len(self.segment_of) and self.segment_of[n.index] == self.segment_of[t]}
-        warped: list[neighbours.WarpedNeighbour] = []
-        if config.mode == "full":
-            near = {i: rgb for i, rgb in same_shot.items() if abs(i - t) <= config.completion.radius}
-            downscaled = self._downscaled(frame.rgb.shape[:2], t)
-            warped = neighbours.warp_neighbours(near, t, self.curr_from_prev, self.orig_from_stab[t],
-                                                downscaled=downscaled)
-            itself = neighbours.warp_neighbours({t: frame.rgb}, t, self.curr_from_prev, self.orig_from_stab[t],
-                                                downscaled=downscaled)[0]
-            completed = completion.complete(stabilized.frame, stabilized.missing, warped, config.completion,
-                                            target_original=itself)
-            emit("completion", completed)
-            output, output_valid = completed.frame, None
-        elif config.mode == "crop":
-            output, output_valid = warping.warp(frame.rgb, self.orig_from_out[t]), None
-        else:
-            output, output_valid = stabilized.frame, ~stabilized.missing
-        if config.deblur.enabled and config.deblur.radius > 0:
-            # Last, on the frame as it will be written: in full mode completion's neighbours are reused (deblurring
-            # warps the sharper ones' colours itself), transferred pixels are resampled once, and completed pixels
-            # are sharpened like the rest (measured +0.06 dB over the frame, +5.7 dB on the completed pixels,
-            # against deblurring before completion), so the frame stays full; missing pixels of --mode none stay
-            # missing. Sharpness is compared on the original frames (pipeline/stages/deblur.py).
-            deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: frame.rgb},
-                                            self.curr_from_prev, self.orig_from_out[t], config.deblur,
-                                            warped=warped, cache=self.energy_cache)
-            emit("deblur", deblurred)
-            output = deblurred.frame
-        emit("output", output)
-        return _RenderedFrame(frame, output, events)

@@ -155,8 +155,8 @@ def test_flow_at_reduced_resolution_from_the_downscaled_copies_matches_shrinking
     from_copies = completion_scores(video, config)
     assert made and set(made) == {(320, 180)}  # only whole frames' colours were shrunk: crops came from the copies
     assert len(made) <= len(video.frames) + 2  # each frame once (two threads may race for one)
-    import pipeline.stabilize
-    monkeypatch.setattr(pipeline.stabilize._FrameRenderer, "_downscaled", lambda self, shape, t: None)
+    import pipeline.chain
+    monkeypatch.setattr(pipeline.chain.FrameChain, "_downscaled", lambda self, shape, t: None)
     shrunk = completion_scores(video, config)
     assert from_copies.pixels == shrunk.pixels > 20_000
     assert abs(from_copies.psnr("ours") - shrunk.psnr("ours")) < 0.5, (vars(from_copies), vars(shrunk))

@@ -9,41 +9,12 @@ from matplotlib.image import imread
 from ffviz import cli, figures
 from ffviz.recorder import RerunRecorder
 from ffviz.rrd import Recording
-from pipeline.stages import deblur
 from pipeline.evaluation import synthetic
-from pipeline.stages.neighbours import WarpedNeighbour
-from pipeline.runtime.observer import NullObserver, Observers, StageCollector
+from pipeline.runtime.observer import Observers, StageCollector
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 TRACED = (4, 20)
 FRAMES = (4, 12, 20)
-
-
-class DeblurAgainstPrevious(NullObserver):
-    """Until pipeline/stabilize.py runs deblurring itself: deblur each output frame with the previous output
-    as its one neighbour (a real pipeline.stages.deblur result) and hand it to the recorder as the pipeline will."""
-
-    def __init__(self, recorder: RerunRecorder) -> None:
-        self.recorder = recorder
-        self.previous: np.ndarray | None = None
-        self.results: dict[int, deblur.DeblurResult] = {}
-        self.pipeline_deblurs = False
-
-    def on_stage(self, stage, stamp, result) -> None:
-        if stage == "deblur":
-            self.pipeline_deblurs = True
-            self.results[stamp.index] = result
-        if stage != "output" or self.pipeline_deblurs:
-            return
-        valid = np.ones(result.shape[:2], bool)
-        b_t = deblur.blurriness(result)
-        if self.previous is None:
-            neighbours, ratios = [], {}
-        else:
-            neighbours, ratios = [WarpedNeighbour(-1, self.previous, valid)], {-1: b_t / deblur.blurriness(self.previous)}
-        self.results[stamp.index] = deblur.deblur(result, valid, neighbours, ratios=ratios, blurriness_t=b_t)
-        self.recorder.on_stage("deblur", stamp, self.results[stamp.index])
-        self.previous = result
 
 
 @pytest.fixture(scope="module")
@@ -55,9 +26,9 @@ def full_recording(tmp_path_factory):
     synthetic.write_video(video, clip)
     rrd = folder / "full.rrd"
     recorder = RerunRecorder(rrd, level="full", trace_frames=TRACED)
-    deblurring = DeblurAgainstPrevious(recorder)
-    stabilize(clip, None, StabilizeConfig(mode="full"), observer=Observers(recorder, deblurring))
-    return rrd, deblurring.results
+    deblurred = StageCollector("deblur")
+    stabilize(clip, None, StabilizeConfig(mode="full"), observer=Observers(recorder, deblurred))
+    return rrd, {stamp.index: result for stamp, result in deblurred.results["deblur"]}
 
 
 def expected_panels(deblurred: dict) -> dict[str, int]:

@@ -19,7 +19,9 @@ from pipeline import geometry
 from pipeline.evaluation import synthetic
 from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC
 from pipeline.stages.neighbours import WarpedNeighbour
-from pipeline.runtime.observer import Observers, StageCollector, Stamp
+from pipeline.results import FrameResult, Stamp
+from pipeline.runtime.observer import Observers, StageCollector
+from pipeline.stages.deblur import DeblurResult
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 N_FRAMES = 30
@@ -290,19 +292,19 @@ def _deblur_run(tmp_path, results):
     recorder = RerunRecorder(rrd, level="full", jpeg_quality=None, trace_frames=[0])
     recorder.on_start(_info(width, height), None)
     for t, result in enumerate(results):
-        recorder.on_stage("deblur", Stamp(t, t / 30), result)
+        recorder.on_frame(FrameResult(Stamp(t, t / 30), None, result.frame, deblur=result))
     recorder.close()
     return Recording.load(rrd)
 
 
-def test_deblur_results_are_recorded_duck_typed(tmp_path):
+def test_deblur_results_are_recorded(tmp_path):
     rng = np.random.default_rng(0)
     image = lambda: rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
-    sharpened = SimpleNamespace(frame=image(), before=image(), blurriness=2.5e-4, neighbours=(-1, 2),
-                                weights=rng.random((48, 64), dtype=np.float32))
+    sharpened = DeblurResult(frame=image(), before=image(), blurriness=2.5e-4, neighbours=(-1, 2),
+                             weights=rng.random((48, 64), dtype=np.float32))
     untouched = image()
-    unchanged = SimpleNamespace(frame=untouched, before=untouched, blurriness=1.0e-4, neighbours=(),
-                                weights=np.zeros((48, 64), np.float32))
+    unchanged = DeblurResult(frame=untouched, before=untouched, blurriness=1.0e-4, neighbours=(),
+                             weights=np.zeros((48, 64), np.float32))
     recording = _deblur_run(tmp_path, [sharpened, unchanged])
     np.testing.assert_allclose(recording.scalars(ent.DEBLUR_BLURRINESS)[1], [2.5e-4, 1.0e-4])
     np.testing.assert_array_equal(recording.scalars(ent.DEBLUR_NEIGHBOURS)[1], [2, 0])

@@ -38,12 +38,10 @@ class _Keep(NullObserver):
         self.result = None
         self.orig_from_out = None
 
-    def on_stage(self, stage, stamp, result) -> None:
-        if stamp is not None and stamp.index == self.index:
-            if stage == "deblur":
-                self.result = result
-            elif stage == "warp":
-                self.orig_from_out = result.orig_from_out
+    def on_frame(self, result) -> None:
+        if result.stamp.index == self.index:
+            self.result = result.deblur
+            self.orig_from_out = result.warp.orig_from_out
 
 
 def _panel(rows, titles, path: Path, box) -> None:

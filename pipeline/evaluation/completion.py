@@ -27,7 +27,8 @@ import cv2
 import numpy as np
 
 from pipeline.stages import warping
-from pipeline.runtime.observer import NullObserver, Stamp
+from pipeline.results import FrameResult
+from pipeline.runtime.observer import NullObserver
 from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
 from pipeline.evaluation.synthetic import SyntheticVideo
@@ -64,15 +65,11 @@ class _CompletionJudge(NullObserver):
         self.truth_of = truth_of
         self.frames = frames
         self.scores = CompletionScores()
-        self._warp: dict[int, warping.WarpResult] = {}
 
-    def on_stage(self, stage: str, stamp: Stamp | None, result) -> None:
-        if stamp is None or (self.frames is not None and stamp.index not in self.frames):
+    def on_frame(self, result: FrameResult) -> None:
+        if result.completion is None or (self.frames is not None and result.stamp.index not in self.frames):
             return
-        if stage == "warp":
-            self._warp[stamp.index] = result
-        elif stage == "completion":
-            self._score(stamp.index, self._warp.pop(stamp.index), result)
+        self._score(result.stamp.index, result.warp, result.completion)
 
     def _score(self, t: int, warped: warping.WarpResult, completed) -> None:
         missing = completed.missing
@@ -246,18 +243,10 @@ class _DynamicJudge(NullObserver):
         self.synthesized_on = {m: {"object": _Pooled(), "background": _Pooled()} for m in self.synthesized}
         self.frames = 0
         self.blurred_frames = 0
-        self._warp: dict[int, warping.WarpResult] = {}
-        self._completion: dict[int, object] = {}
 
-    def on_stage(self, stage: str, stamp: Stamp | None, result) -> None:
-        if stamp is None:
-            return
-        if stage == "warp":
-            self._warp[stamp.index] = result
-        elif stage == "completion":
-            self._completion[stamp.index] = result
-        elif stage == "deblur":
-            self._score(stamp.index, self._warp.pop(stamp.index), self._completion.pop(stamp.index), result)
+    def on_frame(self, result: FrameResult) -> None:
+        if result.deblur is not None:
+            self._score(result.stamp.index, result.warp, result.completion, result.deblur)
 
     def _score(self, t: int, warped: warping.WarpResult, completed, deblurred) -> None:
         video = self.video

@@ -1,40 +1,52 @@
-"""The hook through which the orchestrator shows every stage's result to the outside (e.g. a Rerun recorder).
+"""The hook through which a run shows its typed results to the outside (the Rerun recorder, judges, tests).
 
-pipeline/ computes; observers look. An observer must not modify what it is given.
+pipeline/ computes; observers look and must not modify what they are given. An observer receives, in order:
+``on_start``, ``on_motion`` per frame of pass 1 (single-process runs), ``on_path`` once, ``on_frame`` per
+frame in frame order, ``on_warning`` whenever one is raised, ``on_finish``. The types are pipeline/results.py's.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, Protocol
 
+from pipeline.results import FrameResult, PathPlan, Stamp
+from pipeline.stages.motion import MotionEstimate
 
-@dataclass(frozen=True)
-class Stamp:
-    """Where a per-frame result belongs in time."""
-
-    index: int
-    time_s: float
+__all__ = ["Stamp", "Observer", "NullObserver", "Observers", "StageCollector", "is_null", "null_progress"]
 
 
 class Observer(Protocol):
-    def on_start(self, info: Any, config: Any) -> None: ...
+    def on_start(self, info: Any, config: Any) -> None:
+        """``info``: the input's video_io.VideoInfo; ``config``: the run's StabilizeConfig."""
 
-    def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
-        """A stage's result; ``stamp`` is None for whole-video results (e.g. the smoothed path)."""
+    def on_motion(self, stamp: Stamp, estimate: MotionEstimate) -> None:
+        """Pass 1's estimate for the pair (frame - 1, frame)."""
+
+    def on_path(self, plan: PathPlan) -> None:
+        """The whole video's path plan, before any frame is rendered."""
+
+    def on_frame(self, result: FrameResult) -> None:
+        """One frame through the chain, in frame order."""
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None: ...
 
-    def on_finish(self, report: Any) -> None: ...
+    def on_finish(self, report: Any) -> None:
+        """``report``: the run's stabilize.StabilizeReport."""
 
 
 class NullObserver:
-    """Looks at nothing: the default."""
+    """Looks at nothing: the default, and the base of observers that look at a part."""
 
     def on_start(self, info: Any, config: Any) -> None:
         pass
 
-    def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
+    def on_motion(self, stamp: Stamp, estimate: MotionEstimate) -> None:
+        pass
+
+    def on_path(self, plan: PathPlan) -> None:
+        pass
+
+    def on_frame(self, result: FrameResult) -> None:
         pass
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:
@@ -67,7 +79,7 @@ def null_progress(description: str, total: int | None) -> Progress:
 
 
 def is_null(observer: Observer) -> bool:
-    """Whether ``observer`` looks at nothing (so per-frame results need not be kept for it)."""
+    """Whether ``observer`` looks at nothing (so per-frame intermediates need not be kept for it)."""
     if isinstance(observer, Observers):
         return all(is_null(o) for o in observer.observers)
     return type(observer) is NullObserver
@@ -83,9 +95,17 @@ class Observers:
         for o in self.observers:
             o.on_start(info, config)
 
-    def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
+    def on_motion(self, stamp: Stamp, estimate: MotionEstimate) -> None:
         for o in self.observers:
-            o.on_stage(stage, stamp, result)
+            o.on_motion(stamp, estimate)
+
+    def on_path(self, plan: PathPlan) -> None:
+        for o in self.observers:
+            o.on_path(plan)
+
+    def on_frame(self, result: FrameResult) -> None:
+        for o in self.observers:
+            o.on_frame(result)
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:
         for o in self.observers:
@@ -96,17 +116,42 @@ class Observers:
             o.on_finish(report)
 
 
-class StageCollector(NullObserver):
-    """Keeps the results of chosen stages in memory (for tests and the demo's ground-truth check)."""
+FRAME_PARTS = ("input", "warp", "completion", "deblur", "output")  # FrameResult fields StageCollector keeps
+PLAN_PARTS = ("smoothing", "crop")  # PathPlan fields StageCollector keeps ("path" keeps the plan itself)
 
-    def __init__(self, *stages: str) -> None:
-        self.stages = set(stages)
-        self.results: dict[str, list[tuple[Stamp | None, Any]]] = {s: [] for s in stages}
+
+class StageCollector(NullObserver):
+    """Keeps chosen results in memory, as (stamp, result) lists by name (for tests and the demo's check).
+
+    Names: "motion" (each MotionEstimate), "path" (the PathPlan), a PathPlan field ("smoothing", "crop";
+    stamp None, kept only when not None), or a FrameResult field ("input", "warp", "completion", "deblur",
+    "output"; kept only when not None)."""
+
+    def __init__(self, *names: str) -> None:
+        unknown = set(names) - {"motion", "path", *PLAN_PARTS, *FRAME_PARTS}
+        if unknown:
+            raise ValueError(f"StageCollector: no result called {', '.join(sorted(unknown))}")
+        self.names = set(names)
+        self.results: dict[str, list[tuple[Stamp | None, Any]]] = {n: [] for n in names}
         self.warnings: list[tuple[Stamp | None, str]] = []
 
-    def on_stage(self, stage: str, stamp: Stamp | None, result: Any) -> None:
-        if stage in self.stages:
-            self.results[stage].append((stamp, result))
+    def on_motion(self, stamp: Stamp, estimate: MotionEstimate) -> None:
+        if "motion" in self.names:
+            self.results["motion"].append((stamp, estimate))
+
+    def on_path(self, plan: PathPlan) -> None:
+        if "path" in self.names:
+            self.results["path"].append((None, plan))
+        for name in PLAN_PARTS:
+            part = getattr(plan, name)
+            if name in self.names and part is not None:
+                self.results[name].append((None, part))
+
+    def on_frame(self, result: FrameResult) -> None:
+        for name in FRAME_PARTS:
+            part = getattr(result, name)
+            if name in self.names and part is not None:
+                self.results[name].append((result.stamp, part))
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:
         self.warnings.append((stamp, message))

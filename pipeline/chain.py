@@ -1,0 +1,145 @@
+"""The one definition of what happens to the whole path and to each frame, used by every runner (single process,
+segment-parallel, batch): ``plan_path`` turns pass 1's estimates into the path plan (eq. 18 or L1 smoothing,
+the output transform, the crop window), and ``FrameChain`` turns one frame and its window of neighbours into
+one FrameResult: warp (eqs. 4-5) -> completion (chapter 4, full mode) -> deblurring (chapter 5) -> output.
+
+Invariants: a frame's result depends only on the plan and the frames within ``config.window_frames`` of it
+(never on other frames' results), so frames can be rendered in any order, on threads or in segments, and come
+out identical; neighbours are taken from the frame's own shot only (nothing crosses a scene cut).
+"""
+
+from __future__ import annotations
+
+import itertools
+import threading
+import time
+from typing import Iterable, Iterator
+
+from pipeline.config import StabilizeConfig
+from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
+from pipeline.runtime import parallel, video_io
+from pipeline.runtime.source import FrameSource, one_pass
+from pipeline.runtime.window import Windowed, sliding_window
+from pipeline.stages import completion, deblur, neighbours, smoothing, warping
+
+import numpy as np
+
+SINGLE_FRAME_WARNING = "only one frame: there is no motion to smooth, written as it is"
+NO_CROP_WARNING = "no area is common to all stabilized frames: crop disabled, borders left black"
+RENDER_SLACK_FRAMES = 8  # caches keep this many frames beyond the window: threads render a little out of order
+
+
+def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
+    """Smooth the whole path (it is tiny: one 3x3 matrix a frame) and choose each output frame's transform."""
+    smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
+                                width=width, height=height)
+    warnings = [SINGLE_FRAME_WARNING] if motion_pass.n_frames == 1 else []
+    warnings += smoothing.path_warnings(smoothed, config.smoothing)
+    orig_from_out, crop = smoothed.orig_from_stab, None
+    if config.mode == "crop":
+        crop = warping.largest_crop(smoothed.orig_from_stab, width, height)
+        if crop is None:
+            warnings.append(NO_CROP_WARNING)
+        else:
+            orig_from_out = smoothed.orig_from_stab @ crop.stab_from_out
+    return PathPlan(motion_pass, smoothed, orig_from_out, crop, warnings)
+
+
+class FrameChain:
+    """One frame and its window -> one FrameResult. Safe to call from several threads at once: it only reads the
+    window and the plan (the caches it keeps are locked)."""
+
+    def __init__(self, plan: PathPlan, config: StabilizeConfig, *, keep_intermediates: bool) -> None:
+        self.config = config
+        self.curr_from_prev = plan.motion.curr_from_prev
+        self.orig_from_stab = plan.smoothing.orig_from_stab
+        self.orig_from_out = plan.orig_from_out
+        self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
+                                       side="right") - 1
+        self.keep = keep_intermediates
+        self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
+        self.downscaled: neighbours.Downscaled | None = None  # frames at completion's flow resolution
+        self._downscaled_lock = threading.Lock()
+
+    def _downscaled(self, shape: tuple[int, int], t: int) -> neighbours.Downscaled | None:
+        """The frames at local flow's working resolution (each shrunk once for all the frames it is a neighbour
+        of); None when that is full resolution."""
+        scale = completion.flow_scale(shape, self.config.completion)
+        if scale >= 1.0:
+            return None
+        size = (max(round(shape[1] * scale), 1), max(round(shape[0] * scale), 1))
+        with self._downscaled_lock:
+            if self.downscaled is None or self.downscaled.size != size:
+                self.downscaled = neighbours.Downscaled(size)
+            downscaled = self.downscaled
+        downscaled.forget_before(t - self.config.completion_frames - RENDER_SLACK_FRAMES)
+        return downscaled
+
+    def __call__(self, window: Windowed[video_io.Frame]) -> FrameResult:
+        config = self.config
+        frame = window.centre
+        t = min(frame.index, len(self.orig_from_stab) - 1)  # decoding is deterministic: pass 2 sees pass 1's frames
+        cpu: dict[str, float] = {}
+        clock = time.thread_time()
+
+        def lap(stage: str) -> None:
+            nonlocal clock
+            now = time.thread_time()
+            cpu[stage] = cpu.get(stage, 0.0) + now - clock
+            clock = now
+
+        # Crop mode writes its own warp (by orig_from_out): the stabilized frame is made there only to be kept.
+        stabilized = None
+        if config.mode != "crop" or self.keep:
+            stabilized = warping.warp_frame(frame.rgb, self.orig_from_stab[t])
+        same_shot = {n.index: n.rgb for n in window.neighbours.values()
+                     if n.index < len(self.shot_of) and self.shot_of[n.index] == self.shot_of[t]}
+        warped: list[neighbours.WarpedNeighbour] = []
+        completed = None
+        if config.completing:
+            near = {i: rgb for i, rgb in same_shot.items() if abs(i - t) <= config.completion_frames}
+            downscaled = self._downscaled(frame.rgb.shape[:2], t)
+            warped = neighbours.warp_neighbours(near, t, self.curr_from_prev, self.orig_from_stab[t],
+                                                downscaled=downscaled)
+            itself = neighbours.warp_neighbours({t: frame.rgb}, t, self.curr_from_prev, self.orig_from_stab[t],
+                                                downscaled=downscaled)[0]
+            lap("warp")
+            completed = completion.complete(stabilized.frame, stabilized.missing, warped, config.completion,
+                                            target_original=itself)
+            lap("completion")
+            output, output_valid = completed.frame, None
+        elif config.mode == "crop":
+            output, output_valid = warping.warp(frame.rgb, self.orig_from_out[t]), None
+            lap("warp")
+        else:
+            output, output_valid = stabilized.frame, ~stabilized.missing
+            lap("warp")
+        deblurred = None
+        if config.deblurring:
+            # Last, on the frame as it will be written: completion's warped neighbours are reused, completed pixels
+            # are sharpened like the rest, missing pixels of --mode none stay missing (docs/deblurring.md).
+            deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: frame.rgb},
+                                            self.curr_from_prev, self.orig_from_out[t], config.deblur,
+                                            warped=warped, cache=self.energy_cache)
+            lap("deblur")
+            output = deblurred.frame
+        stamp = Stamp(frame.index, frame.time_s)
+        if not self.keep:
+            return FrameResult(stamp, frame.pts, output, cpu_seconds=cpu)
+        return FrameResult(stamp, frame.pts, output, input=frame, warp=stabilized, completion=completed,
+                           deblur=deblurred, cpu_seconds=cpu)
+
+
+def render_frames(source: FrameSource, plan: PathPlan, config: StabilizeConfig, *, keep_intermediates: bool,
+                  frames: range | None = None, workers: int = 1) -> Iterator[FrameResult]:
+    """Pass 2: every frame's result, in frame order (``workers`` frames at once on threads; identical either way).
+
+    ``frames``: only these (a segment); the window still reads ``config.window_frames`` frames either side of the
+    range, so each frame sees the neighbours it sees in a whole-video run."""
+    chain = FrameChain(plan, config, keep_intermediates=keep_intermediates)
+    with one_pass(source) as decoded:
+        windows: Iterable[Windowed[video_io.Frame]] = sliding_window(decoded, config.window_frames)
+        if frames is not None:
+            windows = (w for w in itertools.takewhile(lambda w: w.centre.index < frames.stop, windows)
+                       if w.centre.index >= frames.start)
+        yield from parallel.ordered_map(chain, windows, workers)

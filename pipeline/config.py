@@ -1,0 +1,52 @@
+"""The whole run's configuration: the output mode and each stage's frozen config, and the one place that derives
+from it how many neighbouring frames the per-frame chain needs on each side."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from pipeline.errors import ConfigError
+from pipeline.stages import completion, deblur, motion, smoothing
+
+OutputMode = Literal["full", "none", "crop"]
+OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
+
+
+@dataclass(frozen=True)
+class StabilizeConfig:
+    mode: OutputMode = "full"
+    motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
+    smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
+    completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
+    deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
+
+    def __post_init__(self) -> None:
+        if self.mode not in OUTPUT_MODES:
+            raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
+
+    @property
+    def completing(self) -> bool:
+        """Whether missing pixels are filled (chapter 4): full mode only."""
+        return self.mode == "full"
+
+    @property
+    def deblurring(self) -> bool:
+        """Whether frames are deblurred from sharper neighbours (chapter 5)."""
+        return self.deblur.enabled and self.deblur.radius > 0
+
+    @property
+    def completion_frames(self) -> int:
+        """Neighbours on each side completion draws on (0 when it does not run)."""
+        return self.completion.radius if self.completing else 0
+
+    @property
+    def deblur_frames(self) -> int:
+        """Neighbours on each side deblurring draws on (0 when it does not run)."""
+        return self.deblur.radius if self.deblurring else 0
+
+    @property
+    def window_frames(self) -> int:
+        """Frames the per-frame chain reads on each side of the frame it makes: the sliding window's half width,
+        and what a segment of a segment-parallel run reads beyond each end so its frames equal a whole run's."""
+        return max(self.completion_frames, self.deblur_frames)
