@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+import fnmatch
 import os
+import typing
 import subprocess
 from types import SimpleNamespace
 
@@ -595,3 +598,58 @@ def test_an_error_on_the_recorders_thread_surfaces_and_leaves_no_file(clip, tmp_
         stabilize(clip, None, StabilizeConfig(mode="none"), observer=recorder)
     recorder.abort()  # what the CLI does on any error
     assert not rrd.exists() and not list(tmp_path.glob(".broken.*"))
+
+
+def _dataclasses_in(hint) -> list[type]:
+    """The dataclass types a field's type hint names (through Optional, tuple, list, dict)."""
+    if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+        return [hint]
+    return [found for arg in typing.get_args(hint) for found in _dataclasses_in(arg)]
+
+
+def test_every_result_field_is_recorded_or_marked_not_recorded():
+    """Walks the result types the recorder receives, field by field, through nested result types: each field has
+    a row in the recorder's one table (entities, Nested or NotRecorded), and the table has no stale rows."""
+    from ffviz.recorder import RECORDED_FIELDS, Nested
+    from pipeline.results import PathPlan
+    from pipeline.stages.motion import MotionEstimate
+
+    seen: set[str] = set()
+    todo = [MotionEstimate, PathPlan, FrameResult]
+    while todo:
+        cls = todo.pop()
+        if cls.__name__ in seen:
+            continue
+        seen.add(cls.__name__)
+        assert cls.__name__ in RECORDED_FIELDS, f"{cls.__name__} has no row in recorder.RECORDED_FIELDS"
+        row = RECORDED_FIELDS[cls.__name__]
+        hints = typing.get_type_hints(cls)
+        names = [f.name for f in dataclasses.fields(cls)]
+        assert sorted(row) == sorted(names), f"{cls.__name__}: table {sorted(row)} vs fields {sorted(names)}"
+        for name in names:
+            nested = _dataclasses_in(hints[name])
+            if nested:
+                assert row[name] == Nested(nested[0].__name__), f"{cls.__name__}.{name} should be Nested"
+                todo.extend(nested)
+            else:
+                assert not isinstance(row[name], Nested), f"{cls.__name__}.{name} is not a result type"
+    assert seen == set(RECORDED_FIELDS), f"rows for types no result holds: {set(RECORDED_FIELDS) - seen}"
+
+
+def test_every_entity_of_the_field_table_is_in_a_recording(full_run, clip, tmp_path):
+    """The table is what the recorder does: every entity it names is in a full recording (the crop window in a
+    crop-mode one), every timeline it names is used."""
+    from ffviz.recorder import RECORDED_FIELDS, NotRecorded
+
+    crop_rrd = tmp_path / "crop.rrd"
+    stabilize(clip, None, StabilizeConfig(mode="crop"), observer=RerunRecorder(crop_rrd, level="summary"))
+    entities = set(full_run[0].entities) | set(Recording.load(crop_rrd).entities)
+    timelines = {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}
+    named = {path for row in RECORDED_FIELDS.values() for target in row.values()
+             if not isinstance(target, str) for path in target}
+    assert named, "the table names no entity"
+    for path in sorted(named - timelines):
+        assert any(fnmatch.fnmatch(e, path) for e in entities), f"{path} is in the table but not in the recording"
+    assert all(timelines <= full_run[0].timelines(e) for e in (ent.OUTPUT_FRAME, ent.INPUT_FRAME))
+    assert all(isinstance(t, (tuple, NotRecorded)) or type(t).__name__ == "Nested"
+               for row in RECORDED_FIELDS.values() for t in row.values())
