@@ -1,7 +1,7 @@
 """The one definition of what happens to the whole path and to each frame, used by every runner (single process,
 segment-parallel, batch): ``plan_path`` turns pass 1's estimates into the path plan (eq. 18 or L1 smoothing,
 the output transform, the crop window), and ``FrameChain`` turns one frame and its window of neighbours into
-one FrameResult: warp (eqs. 4-5) -> completion (chapter 4, full mode) -> deblurring (chapter 5) -> output.
+one FrameResult: warp (eq. 19) -> completion (chapter 4, full mode) -> deblurring (chapter 5) -> output.
 
 Invariants: a frame's result depends only on the plan and the frames within ``config.window_frames`` of it
 (never on other frames' results), so frames can be rendered in any order, on threads or in segments, and come

@@ -30,7 +30,7 @@ class Stamp:
 
 @dataclass
 class MotionPass:
-    """Pass 1 (chapter 3, eqs. 1-3): one transform and one status per frame, the frame's time, and the warnings
+    """Pass 1 (section 3.2, global motion): one transform and one status per frame, the frame's time, and the warnings
     raised on the way (frame index or None for the whole video)."""
 
     curr_from_prev: np.ndarray  # (N, 3, 3); the first frame's is the identity
@@ -66,7 +66,7 @@ class PathPlan:
 
 @dataclass
 class FrameResult:
-    """One frame through the chain: warp (eqs. 4-5) -> completion (chapter 4) -> deblurring (chapter 5)."""
+    """One frame through the chain: warp (eq. 19) -> completion (chapter 4) -> deblurring (chapter 5)."""
 
     stamp: Stamp
     pts: int | None  # the input frame's presentation timestamp, kept for the output
