@@ -240,9 +240,11 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "and 'fmm_step'), or 'none' (default: 3 frames with missing area at --record full, none "
                         "at summary)")
     _deprecated(p, "--trace-frames", "--frames", dest="frames", type=_frame_list)
-    p.add_argument("--codec", choices=video_io.VIDEO_CODECS, default="h264",
-                   help="output video: h264 (x264; --crf, --preset) or mpeg4 (MPEG-4 Part 2, what OpenCV's XVID "
-                        "writer uses; --qscale): a tenth of x264's CPU for about twice the bits (default: %(default)s)")
+    p.add_argument("--codec", choices=video_io.VIDEO_CODECS, default="auto",
+                   help="output video: auto (h264 for 8-bit input, hevc for 10/12-bit and HDR input), h264 (x264; "
+                        "--crf, --preset), hevc (x265; --crf, --preset) or mpeg4 (MPEG-4 Part 2, what OpenCV's XVID "
+                        "writer uses; --qscale; 8-bit only): a tenth of x264's CPU for about twice the bits "
+                        "(default: %(default)s)")
     p.add_argument("--crf", type=int, default=None,
                    help="h264 quality, 0-51 (lower is better; default: %d)" % video_io.Encoding.crf)
     p.add_argument("--preset", choices=video_io.X264_PRESETS, default=None,

@@ -127,5 +127,9 @@ def test_blacken_matches_boolean_assignment_on_frames_views_and_pixel_lists():
     tiny = frame[:1, :1].copy()  # one pixel: OpenCV would read it as 1x3
     blacken(tiny, np.ones((1, 1), bool))
     assert not tiny.any()
+    deep = frame.astype(np.float32) + 0.25  # deeper video's float32 pixels: the same rule
+    expected = deep.copy()
+    expected[mask] = 0
+    np.testing.assert_array_equal(blacken(deep, mask), expected)
     with pytest.raises(ValueError):
-        blacken(frame.astype(np.float32), mask)
+        blacken(frame.astype(np.int16), mask)

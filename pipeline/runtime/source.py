@@ -34,7 +34,7 @@ class FileSource:
         self._reader: video_io.VideoReader | None = None
 
     def frames(self) -> Iterator[video_io.Frame]:
-        with video_io.VideoReader(self.path) as reader:
+        with video_io.VideoReader(self.path, keep_depth=True) as reader:
             self._reader = reader
             try:
                 yield from reader

@@ -1,7 +1,9 @@
 """The project's only video I/O layer, on PyAV: probe, count, read upright RGB frames, write H.264.
 
-Frames are numpy RGB uint8 arrays of shape (H, W, 3). The reader applies the container's rotation,
-so frames are upright and the writer stores them with no rotation tag. Every expected failure is
+Frames are numpy RGB arrays of shape (H, W, 3): uint8, or float32 on the same 0..255 scale for video of more
+than 8 bits read with keep_depth (pipeline/runtime/colour.py: matrix, range, tags and depth are the input's, in
+and out). The reader applies the container's rotation, so frames are upright and the writer stores them with no
+rotation tag. Every expected failure is
 raised as InputError or OutputError with a one-line message that names the file.
 """
 
@@ -21,6 +23,8 @@ import av.error
 import numpy as np
 
 from pipeline.errors import ConfigError, InputError, OutputError
+from pipeline.runtime.colour import ColourDescription
+from pipeline.runtime import colour as colours
 
 # Output suffix -> FFmpeg muxer name. H.264 + AAC plays from all three.
 OUTPUT_FORMATS = {".mp4": "mp4", ".mov": "mov", ".mkv": "matroska"}
@@ -63,6 +67,7 @@ class VideoInfo:
     has_audio: bool
     codec: str
     time_base: Fraction  # of the video stream; Frame.pts counts in it
+    colour: ColourDescription = ColourDescription()  # range, matrix, primaries, transfer, depth (first frame's)
 
 
 @dataclass(frozen=True)
@@ -70,7 +75,7 @@ class Frame:
     index: int  # 0-based decode order after dropping undecodable frames
     pts: int | None  # presentation timestamp in the stream's time_base
     time_s: float  # seconds since the stream's start_time (absolute time is pts * time_base)
-    rgb: np.ndarray  # (H, W, 3) uint8, rotation already applied
+    rgb: np.ndarray  # (H, W, 3) uint8 (float32 0..255: deeper video read with keep_depth), rotation applied
 
 
 def _reason(error: BaseException) -> str:
@@ -321,6 +326,7 @@ def probe_video(path: str | os.PathLike[str]) -> VideoInfo:
             has_audio=bool(container.streams.audio),
             codec=stream.codec_context.name,
             time_base=Fraction(time_base) if time_base else Fraction(1, 1) / fps,
+            colour=colours.describe(first),
         )
 
 
@@ -356,10 +362,13 @@ class VideoReader:
 
     A frame that does not decode is replaced by the previous good one at its own time (see _Pictures),
     so frame count and timing are the file's; each such frame adds a line to `warnings`.
+    RGB by the video's own matrix and range (info.colour); ``keep_depth``: video of more than 8 bits comes as
+    float32 RGB on the 0..255 scale (else uint8 always).
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, keep_depth: bool = False) -> None:
         self.info: VideoInfo = probe_video(path)
+        self.keep_depth = keep_depth
         self.warnings: list[str] = []
         self._container = _open_input(self.info.path)
         self._stream = _video_stream(self._container, self.info.path)
@@ -383,10 +392,7 @@ class VideoReader:
         for index, (pts, frame) in enumerate(self.decoded_frames()):
             pts = pts if pts is not None else frame.dts
             time_s = float((pts - start) * info.time_base) if pts is not None else float(index / info.fps)
-            # rgb24 covers grayscale and 10-bit sources; honour a full-range tag on plain yuv.
-            rgb = frame.to_ndarray(
-                format="rgb24", width=stored_w, height=stored_h, src_color_range=frame.color_range or None
-            )
+            rgb = colours.to_rgb(frame, info.colour, stored_w, stored_h, deep=self.keep_depth)
             yield Frame(index=index, pts=pts, time_s=time_s, rgb=_upright(rgb, info.rotation))
 
     def close(self) -> None:
@@ -540,10 +546,12 @@ class _AudioPassthrough:
 
 
 X264_PRESETS: tuple[str, ...] = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow",
-                                 "slower", "veryslow")
-_ENCODERS = {"h264": "libx264", "mpeg4": "mpeg4"}  # --codec name -> FFmpeg encoder
-VIDEO_CODECS: tuple[str, ...] = tuple(_ENCODERS)
-CODEC_OPTIONS = {"h264": ("crf", "preset"), "mpeg4": ("qscale",)}  # the Encoding fields each codec uses
+                                 "slower", "veryslow")  # x265's presets have the same names
+_ENCODERS = {"h264": "libx264", "hevc": "libx265", "mpeg4": "mpeg4"}  # --codec name -> FFmpeg encoder
+VIDEO_CODECS: tuple[str, ...] = ("auto", *_ENCODERS)
+# the Encoding fields each codec uses
+CODEC_OPTIONS = {"auto": ("crf", "preset"), "h264": ("crf", "preset"), "hevc": ("crf", "preset"), "mpeg4": ("qscale",)}
+_MAX_DEPTH = {"h264": 10, "hevc": 12, "mpeg4": 8}  # bits per sample each encoder can write (4:2:0)
 _MPEG4_MAX_TIME_BASE_DENOMINATOR = 65535  # the MPEG-4 Part 2 standard's limit (FFmpeg refuses more)
 
 
@@ -551,13 +559,15 @@ _MPEG4_MAX_TIME_BASE_DENOMINATOR = 65535  # the MPEG-4 Part 2 standard's limit (
 class Encoding:
     """How the output video is compressed.
 
-    ``h264`` (default): x264 at constant quality ``crf`` (0-51, lower is better) with its speed/size ``preset``.
+    ``auto`` (default): ``h264`` for 8-bit input, ``hevc`` for deeper input (10/12-bit, HDR: docs/colour.md).
+    ``h264``: x264 at constant quality ``crf`` (0-51, lower is better) with its speed/size ``preset``; High 10
+    for deeper input. ``hevc``: x265 (Main, Main 10 or Main 12 by the input's depth), the same two settings.
     ``mpeg4``: FFmpeg's MPEG-4 Part 2 encoder, which OpenCV's XVID writer uses, at the fixed quantiser
     ``qscale`` (2-31, lower is better): ~10x less CPU than x264 medium for more bits (vplab_C against CRF 18:
     q 3 1.6x the bits at -1.1 dB PSNR, q 2 2.5x at +0.5 dB).
     """
 
-    codec: str = "h264"
+    codec: str = "auto"
     crf: int = 18
     preset: str = "medium"
     qscale: int = 3
@@ -572,8 +582,14 @@ class Encoding:
         if not 2 <= self.qscale <= 31:
             raise ConfigError(f"qscale must be between 2 and 31 (MPEG-4's quantisers), not {self.qscale}")
 
-    def stream_options(self) -> dict[str, str]:
-        if self.codec == "h264":
+    def encoder(self, bit_depth: int) -> str:
+        """The --codec name used for video of ``bit_depth`` bits ("auto" resolved)."""
+        if self.codec == "auto":
+            return "hevc" if bit_depth > 8 else "h264"
+        return self.codec
+
+    def stream_options(self, bit_depth: int = 8) -> dict[str, str]:
+        if self.encoder(bit_depth) in ("h264", "hevc"):
             return {"crf": str(self.crf), "preset": self.preset}
         # A fixed quantiser: FFmpeg's -q:v sets it per frame, which PyAV cannot; clamping the rate control's
         # range to one value does the same.
@@ -581,7 +597,8 @@ class Encoding:
 
 
 class VideoWriter:
-    """Writes RGB frames (yuv420p, H.264 by default: ``Encoding``) with the input's timestamps, atomically.
+    """Writes RGB frames (4:2:0, H.264 or for deeper input HEVC by default: ``Encoding``) with the input's
+    timestamps and colour description (``like.colour``: matrix, range, tags, depth), atomically.
 
     Output goes to a hidden temp file beside `path`; close() moves it onto `path`, abort() (and an
     exception inside the `with` block) deletes it, so a failed run leaves no file behind.
@@ -632,7 +649,7 @@ class VideoWriter:
                 if like.time_base.denominator < 2**31:
                     options["movie_timescale"] = str(like.time_base.denominator)
             self._container = av.open(str(self._temp), "w", format=fmt, options=options)
-            self._video = self._add_video_stream(like.fps, encoding)
+            self._video = self._add_video_stream(like.fps, encoding, like.colour, fmt)
             if audio_from is not None:
                 self._audio = _AudioPassthrough(Path(audio_from), self._container, self.warnings)
         except InputError:
@@ -645,14 +662,36 @@ class VideoWriter:
             self.abort()
             raise
 
-    def _add_video_stream(self, fps: Fraction, encoding: Encoding) -> av.VideoStream:
-        stream = self._container.add_stream(_ENCODERS[encoding.codec], rate=fps, options=encoding.stream_options())
+    def _add_video_stream(self, fps: Fraction, encoding: Encoding, colour: ColourDescription,
+                          fmt: str) -> av.VideoStream:
+        codec = encoding.encoder(colour.bit_depth)
+        depth = min(max(colour.bit_depth, 8), _MAX_DEPTH[codec])
+        if depth in (9, 11):
+            depth += 1
+        options = encoding.stream_options(colour.bit_depth)
+        if codec == "hevc":
+            options["x265-params"] = ":".join(["log-level=error", *colour.x265_hdr_params()])
+        if depth < colour.bit_depth:
+            self.warnings.append(f"{codec} cannot store {colour.bit_depth}-bit video: written at {depth} bits, with "
+                                 f"the input's colour tags ({colour.summary()}); --codec hevc keeps up to 12")
+        elif colour.mastering is not None and codec != "hevc":
+            self.warnings.append(f"{codec} output does not carry the input's HDR mastering display metadata "
+                                 f"(colour tags kept); --codec hevc does")
+        if colour.dynamic_metadata is not None:
+            self.warnings.append(f"the input's {colour.dynamic_metadata} dynamic metadata is not carried over: the "
+                                 f"output is plain {'HLG' if colour.transfer == colours.HLG else 'HDR10'}, tags kept")
+        if colour.chroma in ("4:2:2", "4:4:4"):
+            self.warnings.append(f"{colour.chroma} input written as 4:2:0 (colour tags and depth kept)")
+        self._colour, self._pix_fmt = colour, "yuv420p" if depth == 8 else f"yuv420p{depth}le"
+        stream = self._container.add_stream(_ENCODERS[codec], rate=fps, options=options)
         # yuv420p halves chroma, so H.264 needs even sizes (its crop step is 2 pixels too). An odd
         # side is padded by one replicated edge pixel: the output is at most 1 px wider/taller,
         # which beats yuv444p (High 4:4:4 profile, which many players refuse).
         stream.width = self.width + self.width % 2
         stream.height = self.height + self.height % 2
-        stream.pix_fmt = "yuv420p"
+        stream.pix_fmt = self._pix_fmt
+        if codec == "hevc" and fmt in ("mp4", "mov"):
+            stream.codec_context.codec_tag = "hvc1"  # what Apple's players require of HEVC in MP4/MOV
         # Input time base in, so input pts go through unchanged (the MP4 muxer may refine the
         # track's time base after the header; PyAV rescales packets to it exactly).
         stream.time_base = self._time_base
@@ -661,9 +700,8 @@ class VideoWriter:
             # e.g. MPEG-TS's 1/90000: frames keep their times to 1/60000 s (PyAV rescales their pts).
             codec_time_base = Fraction(1, 60000)
         stream.codec_context.time_base = codec_time_base
-        # PyAV converts RGB with the BT.601 matrix into limited range; say so, so players agree.
-        stream.codec_context.colorspace = 6  # AVCOL_SPC_SMPTE170M (BT.601)
-        stream.codec_context.color_range = 1  # AVCOL_RANGE_MPEG (limited)
+        # The input's matrix, range, primaries and transfer: write() converts by the same matrix and range.
+        colours.tag_stream(stream.codec_context, colour)
         return stream
 
     def write(self, rgb: np.ndarray, *, pts: int | None = None, time_s: float | None = None) -> None:
@@ -671,9 +709,9 @@ class VideoWriter:
         else time_s seconds; else one frame after the previous one."""
         if self._container is None:
             raise RuntimeError(f"VideoWriter for {self.path} is already closed")
-        if rgb.dtype != np.uint8 or rgb.shape != (self.height, self.width, 3):
+        if rgb.dtype not in (np.uint8, np.float32) or rgb.shape != (self.height, self.width, 3):
             expected = (self.height, self.width, 3)
-            raise ValueError(f"expected a uint8 frame of shape {expected}, got {rgb.dtype} {rgb.shape}")
+            raise ValueError(f"expected a uint8 or float32 frame of shape {expected}, got {rgb.dtype} {rgb.shape}")
         if pts is None:
             if time_s is not None:
                 pts = round(time_s / self._time_base)
@@ -686,7 +724,7 @@ class VideoWriter:
         self._last_pts = pts
         if self.width % 2 or self.height % 2:
             rgb = np.pad(rgb, ((0, self.height % 2), (0, self.width % 2), (0, 0)), mode="edge")
-        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+        frame = colours.from_rgb(rgb, self._colour, self._pix_fmt)
         frame.pts = pts
         frame.time_base = self._time_base
         try:

@@ -339,8 +339,8 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
     ``blurriness_t``: b_t, for the record.
     """
     target = np.asarray(target)
-    if target.ndim != 3 or target.shape[2] != 3 or target.dtype != np.uint8:
-        raise ValueError(f"deblur needs an (H, W, 3) uint8 frame, not {target.shape} {target.dtype}")
+    if target.ndim != 3 or target.shape[2] != 3 or target.dtype not in (np.uint8, np.float32):
+        raise ValueError(f"deblur needs an (H, W, 3) uint8 or float32 frame, not {target.shape} {target.dtype}")
     if target_valid.shape != target.shape[:2]:
         raise ValueError(f"valid mask {target_valid.shape} does not match the frame {target.shape[:2]}")
     height, width = target_valid.shape
@@ -357,7 +357,7 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
     used: tuple[int, ...] = ()
     if sharper:
         grid = kernels.ErrorGrid(target, target_valid, config.error_sigma_px * scale, grow)
-        taken = kernels.Contributions(len(sharper), grid, target_valid)
+        taken = kernels.Contributions(len(sharper), grid, target_valid, target.dtype)
         guard = None if config.structure_min is None else StructureGuard(
             grid.target_small, grid.sigma_small, config.structure_window_px * scale / grid.factor,
             config.structure_min)
@@ -393,7 +393,8 @@ def deblur(target: np.ndarray, target_valid: np.ndarray, neighbours: Sequence[Wa
                 kernels.fill_rejected(error, config.reject_error, grow, grid, bands, taken.next_rejected())
             taken.add(n.offset, first, last, exact, mask, bool(bands), error, float(ratios[n.offset]))
         if taken.count:
-            frame, weights, counts = kernels.blend(target, *taken.arrays(), *grid.up_tables, alpha)  # eq. 30
+            half = np.float32(0.5 if target.dtype == np.uint8 else 0.0)  # rounds into uint8; float32 as it is
+            frame, weights, counts = kernels.blend(target, *taken.arrays(), *grid.up_tables, alpha, half)  # eq. 30
             used = tuple(offset for offset, count in zip(taken.offsets, counts) if count > 0)
     if not used:
         provenance = Provenance(taken, alpha, None, target_valid) if sharper else None
@@ -430,11 +431,11 @@ def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, fr
 # ---------------------------------------------------------------------------------------------- internals
 
 def _downscaled_energy(image: np.ndarray) -> np.ndarray:
-    """cv2.resize(gradient_energy(image), ENERGY_SCALE of its size, INTER_AREA), for RGB uint8 frames in one pass
+    """cv2.resize(gradient_energy(image), ENERGY_SCALE of its size, INTER_AREA), for RGB frames in one pass
     that never holds the full-resolution maps (within float32 rounding of the two-step result)."""
     height, width = image.shape[:2]
     size = (max(round(width * ENERGY_SCALE), 1), max(round(height * ENERGY_SCALE), 1))
-    if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+    if image.ndim != 3 or image.shape[2] != 3 or image.dtype not in (np.uint8, np.float32):
         return cv2.resize(gradient_energy(image), size, interpolation=cv2.INTER_AREA)
     row_index, row_weight, row_count, _ = kernels.area_table(height, size[1])
     col_index, col_weight, col_count, _ = kernels.area_table(width, size[0])

@@ -470,12 +470,12 @@ def blend(target: np.ndarray, rgbs: np.ndarray, masks: np.ndarray, mask_index: n
            has_rejected: np.ndarray, errors: np.ndarray, firsts: np.ndarray, lasts: np.ndarray, exacts: np.ndarray,
            ratios: np.ndarray, row_tap0: np.ndarray, row_tap1: np.ndarray, row_fraction: np.ndarray,
            col_tap0: np.ndarray, col_tap1: np.ndarray, col_fraction: np.ndarray,
-           alpha: np.float32) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+           alpha: np.float32, half: np.float32) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eq. 30 row by row over every neighbour k: (I_t + sum_k w_k I_k) / (1 + sum_k w_k), with w_k of eq. 31 on
     the pixels in k's row span, in masks[mask_index[k]] (rows not exacts[k]) and not in rejecteds[k] (looked at
     on the rows has_rejected[k] marks); E_k is the low-res errors[k] upsampled as cv2.resize INTER_LINEAR would.
-    Returns the frame (uint8, rounded), the share taken from neighbours 1 - 1 / (1 + sum w), and the number of
-    pixels each neighbour gave weight to.
+    Returns the frame (the target's type: uint8 rounded with ``half`` 0.5, float32 0..255 with ``half`` 0), the
+    share taken from neighbours 1 - 1 / (1 + sum w), and the number of pixels each neighbour gave weight to.
 
     A row's sums stay in cache while every neighbour adds to them. The loops run over colour samples (weights
     and sums repeated per sample) with unsigned indices and numpy's error model (no zero-division check), so
@@ -492,7 +492,7 @@ def blend(target: np.ndarray, rgbs: np.ndarray, masks: np.ndarray, mask_index: n
     uppers, lowers = np.empty((count, samples), np.float32), np.empty((count, samples), np.float32)
     tags = np.full((count, 2), -1, np.int64)
     flat_target, flat_frame = target.reshape(height, samples), frame.reshape(height, samples)
-    one, zero, half, top, three = np.float32(1.0), np.float32(0.0), np.float32(0.5), np.float32(255.0), np.uint64(3)
+    one, zero, top, three = np.float32(1.0), np.float32(0.0), np.float32(255.0), np.uint64(3)
     for y in range(height):
         target_row = flat_target[y]
         for i in range(samples):
@@ -537,7 +537,7 @@ def blend(target: np.ndarray, rgbs: np.ndarray, masks: np.ndarray, mask_index: n
         for x in range(np.uint64(width)):
             share_row[x] = one - one / totals[three * x]
         for i in range(samples):
-            frame_row[i] = np.uint8(min(max(sums[i] / totals[i] + half, zero), top))
+            frame_row[i] = min(max(sums[i] / totals[i] + half, zero), top)  # truncated into uint8: rounded
     return frame, share, counts
 
 
@@ -545,11 +545,11 @@ class Contributions:
     """The neighbours that take part in eq. 30, in the arrays blend reads: a slot each, filled in order (the
     colours warped straight into theirs)."""
 
-    def __init__(self, capacity: int, grid: ErrorGrid, target_valid: np.ndarray) -> None:
+    def __init__(self, capacity: int, grid: ErrorGrid, target_valid: np.ndarray, dtype: type = np.uint8) -> None:
         height, width = target_valid.shape
         self.count = 0
         self.offsets: list[int] = []
-        self.rgbs = np.empty((capacity, height, width, 3), np.uint8)
+        self.rgbs = np.empty((capacity, height, width, 3), dtype)  # the target's pixel type
         self.errors = np.empty((capacity, grid.small_size[1], grid.small_size[0]), np.float32)
         self.firsts = np.empty((capacity, height), np.int32)
         self.lasts = np.empty((capacity, height), np.int32)

@@ -38,7 +38,8 @@ def smooth_fill(image: np.ndarray, missing: np.ndarray, *, blur_sigma: float = 4
         else:
             smoothed = _fill_box(image[y0:y1, x0:x1], missing[y0:y1, x0:x1], blur_sigma)
         values = smoothed[group_y - y0, group_x - x0]
-        out[group_y, group_x] = np.clip(values + 0.5, 0, 255).astype(image.dtype)
+        half = 0.5 if image.dtype == np.uint8 else 0.0  # rounds into uint8; float32 (deeper video) as it is
+        out[group_y, group_x] = np.clip(values + half, 0, 255).astype(image.dtype)
     return out
 
 

@@ -414,7 +414,8 @@ def inpaint_motion(flow: np.ndarray, known: np.ndarray, neighbour_rgb: np.ndarra
                    region: np.ndarray | None = None, config: MotionInpaintConfig = MotionInpaintConfig()) -> MotionInpaintResult:
     """Propagate `flow` from `known` pixels into `region` (default ~known) in FMM order with eq. 24 weights.
 
-    neighbour_rgb: (H, W, 3) uint8, the neighbour frame already warped into this frame's coordinates;
+    neighbour_rgb: (H, W, 3) uint8 (float32 0..255 for deeper video), the neighbour frame already warped into this
+    frame's coordinates;
     neighbour_valid: where it has content (default: everywhere). Only the bounding box of the region
     grown by the radius is processed.
     """
@@ -425,8 +426,9 @@ def inpaint_motion(flow: np.ndarray, known: np.ndarray, neighbour_rgb: np.ndarra
     known = _as_mask(known, shape, "known")
     region = None if region is None else _as_mask(region, shape, "region")
     neighbour_rgb = np.asarray(neighbour_rgb)
-    if neighbour_rgb.shape != (*shape, 3) or neighbour_rgb.dtype != np.uint8:
-        raise ValueError(f"neighbour_rgb must be uint8 of shape {(*shape, 3)}, got {neighbour_rgb.dtype} {neighbour_rgb.shape}")
+    if neighbour_rgb.shape != (*shape, 3) or neighbour_rgb.dtype not in (np.uint8, np.float32):
+        raise ValueError(f"neighbour_rgb must be uint8 or float32 of shape {(*shape, 3)}, got {neighbour_rgb.dtype} "
+                         f"{neighbour_rgb.shape}")
     valid = np.ones(shape, bool) if neighbour_valid is None else _as_mask(neighbour_valid, shape, "neighbour_valid")
 
     out_flow, arrival, finite = _known_flow(np.ascontiguousarray(flow, dtype=np.float32), known)

@@ -49,7 +49,7 @@ class MosaicConfig:
 
 @dataclass(frozen=True)
 class MosaicResult:
-    frame: np.ndarray  # (H, W, 3) uint8: the target with the accepted missing pixels filled (eq. 22)
+    frame: np.ndarray  # (H, W, 3) as the target (uint8 or float32): accepted missing pixels filled (eq. 22)
     variance: np.ndarray  # (H, W) float32: eq. 20; NaN outside the missing area or with < min_neighbours covering
     accepted: np.ndarray  # (H, W) bool: missing pixels filled here (variance < threshold)
     remaining: np.ndarray  # (H, W) bool: still missing after this stage
@@ -133,9 +133,12 @@ def mosaic_from_samples(target: np.ndarray, missing: np.ndarray, colours: np.nda
     lower = np.argmax(rank == np.maximum(count - 1, 0) // 2, axis=0)
     upper = np.argmax(rank == count // 2, axis=0)
     columns = np.arange(len(flat))
-    median = (colours[lower, columns].astype(np.uint16) + colours[upper, columns] + 1) // 2
+    if colours.dtype == np.uint8:
+        median = ((colours[lower, columns].astype(np.uint16) + colours[upper, columns] + 1) // 2).astype(np.uint8)
+    else:  # float32 (deeper video): the exact middle
+        median = (colours[lower, columns] + colours[upper, columns]) * np.float32(0.5)
 
-    frame.reshape(-1, 3)[flat[ok]] = median[ok].astype(np.uint8)
+    frame.reshape(-1, 3)[flat[ok]] = median[ok]
     variance.reshape(-1)[flat] = sample_variance
     accepted.reshape(-1)[flat[ok]] = True
     return MosaicResult(frame, variance, accepted, missing & ~accepted, coverage)

@@ -139,6 +139,8 @@ def prepare(rgb: np.ndarray, config: MotionConfig, ignore: np.ndarray | None = N
     height, width = rgb.shape[:2]
     scale = min(1.0, config.max_side / max(width, height))
     small = rgb if scale == 1.0 else cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    if small.dtype != np.uint8:  # deeper video (float32, 0..255): tracking works on 8-bit grey all the same
+        small = np.clip(small + np.float32(0.5), 0, 255).astype(np.uint8)
     gray = cv2.cvtColor(small, cv2.COLOR_RGB2GRAY)
     hsv = cv2.cvtColor(small, cv2.COLOR_RGB2HSV)
     hist = cv2.calcHist([hsv], [0, 1], None, [30, 32], [0, 180, 0, 256])

@@ -1,0 +1,284 @@
+"""The video's colour description, and the conversions between its YUV samples and the pipeline's RGB.
+
+Read once from the first decoded picture (range, matrix, primaries, transfer, bit depth, HDR mastering metadata)
+and kept in VideoInfo.colour. Frames are converted to RGB with the input's own matrix and range, and written back
+with the same matrix, range and tags, so a player that honours tags shows the output's colours as the input's.
+Primaries and transfer are not converted: the pipeline works on the input's RGB code values as they are.
+
+Depth: 8-bit video travels as uint8 RGB; deeper video (10/12 bits) as float32 RGB on the same 0..255 scale
+(fractions of a level carry the extra bits), so every threshold in intensity units means the same at any depth.
+``display_rgb`` turns either into 8-bit BT.709 display RGB (HDR tone-mapped) for people to look at.
+Chroma location is not exposed by PyAV 18: written as 'left' (type 0, the H.264/HEVC default).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import av
+import numpy as np
+from av.video.reformatter import Interpolation
+
+# FFmpeg's names (as ffprobe prints them) for the AVColorSpace / AVColorPrimaries / AVColorTransferCharacteristic /
+# AVColorRange numbers.
+MATRIX_NAMES = {0: "gbr", 1: "bt709", 2: "unknown", 4: "fcc", 5: "bt470bg", 6: "smpte170m", 7: "smpte240m",
+                8: "ycgco", 9: "bt2020nc", 10: "bt2020c", 14: "ictcp"}
+PRIMARIES_NAMES = {1: "bt709", 2: "unknown", 4: "bt470m", 5: "bt470bg", 6: "smpte170m", 7: "smpte240m", 8: "film",
+                   9: "bt2020", 10: "smpte428", 11: "smpte431", 12: "smpte432", 22: "ebu3213"}
+TRANSFER_NAMES = {1: "bt709", 2: "unknown", 4: "bt470m", 5: "bt470bg", 6: "smpte170m", 7: "smpte240m", 8: "linear",
+                  9: "log100", 10: "log316", 11: "iec61966-2-4", 12: "bt1361e", 13: "iec61966-2-1", 14: "bt2020-10",
+                  15: "bt2020-12", 16: "smpte2084", 17: "smpte428", 18: "arib-std-b67"}
+RANGE_NAMES = {0: "unknown", 1: "tv", 2: "pc"}
+LIMITED, FULL = 1, 2
+BT601, BT709, BT2020_NCL = 6, 1, 9
+PQ, HLG = 16, 18
+# AVColorSpace -> the swscale matrix PyAV's reformat takes (SWS_CS_*); anything else is converted as BT.601,
+# FFmpeg's default for untagged video, and tagged so.
+_SWS_MATRIX = {1: 1, 4: 4, 5: 5, 6: 5, 7: 7, 9: 9, 10: 9}
+# Planar 4:2:0 (nearly all video) is converted here, exactly (from_rgb, _yuv420_to_rgb); other layouts by swscale
+# with these flags. Measured on a smooth colour image: swscale's defaults read 8-bit BT.709 limited range ~1.2
+# levels dark (these flags: 0.0); its 10-bit paths are ~0.4% off in gain both ways, and full chroma interpolation
+# misreads 10-bit input, so it is for 8 bits only.
+_FLAGS_8 = Interpolation.BILINEAR | Interpolation.ACCURATE_RND | Interpolation.FULL_CHR_H_INT | \
+    Interpolation.FULL_CHR_H_INP
+_FLAGS_DEEP = Interpolation.BICUBIC | Interpolation.ACCURATE_RND
+_KR_KB = {1: (0.2126, 0.0722), 4: (0.30, 0.11), 5: (0.299, 0.114), 6: (0.299, 0.114), 7: (0.212, 0.087),
+          9: (0.2627, 0.0593), 10: (0.2627, 0.0593)}  # luma weights of R and B per matrix (ITU-T H.273)
+_DEPTHS = {"yuv420p": 8, "yuvj420p": 8, "yuv420p10le": 10, "yuv420p12le": 12}
+
+
+@dataclass(frozen=True)
+class ColourDescription:
+    """How the video's samples map to colour. The defaults are what an untagged 8-bit source (and frames
+    handed in as arrays) is taken to be: BT.601 limited range, primaries and transfer unknown."""
+
+    matrix: int = BT601  # AVColorSpace the conversion uses (an untagged input's BT.601 is written as such)
+    range: int = LIMITED  # AVColorRange: 1 limited (tv), 2 full (pc)
+    primaries: int = 2  # AVColorPrimaries, 2 unknown: tagged as read, never converted
+    transfer: int = 2  # AVColorTransferCharacteristic, 2 unknown: tagged as read, never converted
+    bit_depth: int = 8  # bits per sample of the stored video
+    pix_fmt: str = "yuv420p"  # the input's pixel format, for the record
+    mastering: tuple[tuple[float, float], ...] | None = None  # R, G, B, white (x, y); (min, max) cd/m2 last
+    content_light: tuple[int, int] | None = None  # MaxCLL, MaxFALL (cd/m2)
+    dynamic_metadata: str | None = None  # "Dolby Vision" / "HDR10+" per-scene metadata, which is not carried over
+
+    @property
+    def deep(self) -> bool:
+        """More than 8 bits: frames travel as float32 RGB (module docstring)."""
+        return self.bit_depth > 8
+
+    @property
+    def chroma(self) -> str:
+        """The input's chroma subsampling: 4:2:0, 4:2:2, 4:4:4 (YUV), or rgb / gray."""
+        if self.pix_fmt.startswith(("gbr", "rgb", "bgr")):
+            return "rgb"
+        if self.pix_fmt.startswith(("gray", "ya")):
+            return "gray"
+        return "4:4:4" if "444" in self.pix_fmt else "4:2:2" if "422" in self.pix_fmt else "4:2:0"
+
+    @property
+    def hdr(self) -> bool:
+        return self.transfer in (PQ, HLG)
+
+    def summary(self) -> str:
+        """One line as ffprobe would put it: pixel format, range, matrix, primaries, transfer, depth, HDR metadata."""
+        text = (f"{self.pix_fmt}, {RANGE_NAMES.get(self.range, self.range)}, {MATRIX_NAMES.get(self.matrix, self.matrix)}"
+                f", {PRIMARIES_NAMES.get(self.primaries, self.primaries)}, "
+                f"{TRANSFER_NAMES.get(self.transfer, self.transfer)}, {self.bit_depth}-bit")
+        if self.mastering is not None:
+            text += f", mastering display {self.mastering[-1][0]:g}-{self.mastering[-1][1]:g} cd/m2"
+        if self.content_light is not None:
+            text += f", MaxCLL {self.content_light[0]}, MaxFALL {self.content_light[1]}"
+        return text
+
+    def x265_hdr_params(self) -> list[str]:
+        """x265's master-display and max-cll settings that carry the input's HDR metadata (empty without it)."""
+        params = []
+        if self.mastering is not None:
+            (rx, ry), (gx, gy), (bx, by), (wx, wy), (low, high) = self.mastering
+            c = [round(v * 50000) for v in (gx, gy, bx, by, rx, ry, wx, wy)]
+            params.append(f"master-display=G({c[0]},{c[1]})B({c[2]},{c[3]})R({c[4]},{c[5]})WP({c[6]},{c[7]})"
+                          f"L({round(high * 10000)},{round(low * 10000)})")
+        if self.content_light is not None:
+            params.append(f"max-cll={self.content_light[0]},{self.content_light[1]}")
+        return params
+
+
+_DYNAMIC = {av.sidedata.sidedata.Type.DOVI_METADATA: "Dolby Vision", av.sidedata.sidedata.Type.DOVI_RPU_BUFFER:
+            "Dolby Vision", av.sidedata.sidedata.Type.DYNAMIC_HDR_PLUS: "HDR10+"}
+
+
+def describe(frame: av.VideoFrame) -> ColourDescription:
+    """The colour description of a decoded picture (the first one: read once per video)."""
+    name = frame.format.name
+    depth = max(component.bits for component in frame.format.components)
+    matrix = int(frame.colorspace)
+    if matrix not in _SWS_MATRIX:  # untagged, or a matrix swscale lacks: converted as BT.601, and said so
+        matrix = BT601
+    colour_range = int(frame.color_range)
+    if colour_range not in (LIMITED, FULL):  # swscale's own rule: the JPEG formats are full range, the rest limited
+        colour_range = FULL if name.startswith("yuvj") or name.startswith(("gbr", "rgb", "bgr")) else LIMITED
+    mastering = content_light = dynamic = None
+    for side in frame.side_data:
+        if side.type in _DYNAMIC:
+            dynamic = _DYNAMIC[side.type]
+        data = bytes(side)
+        if side.type == av.sidedata.sidedata.Type.MASTERING_DISPLAY_METADATA and len(data) >= 88:
+            numbers = struct.unpack("22i", data[:88])
+            ratios = [numbers[i] / numbers[i + 1] if numbers[i + 1] else 0.0 for i in range(0, 20, 2)]
+            if numbers[20] and numbers[21]:  # has primaries, has luminance
+                mastering = (tuple(ratios[0:2]), tuple(ratios[2:4]), tuple(ratios[4:6]), tuple(ratios[6:8]),
+                             tuple(ratios[8:10]))
+        elif side.type == av.sidedata.sidedata.Type.CONTENT_LIGHT_LEVEL and len(data) >= 8:
+            content_light = struct.unpack("2I", data[:8])
+    return ColourDescription(matrix=matrix, range=colour_range, primaries=int(frame.color_primaries),
+                             transfer=int(frame.color_trc), bit_depth=int(depth), pix_fmt=name,
+                             mastering=mastering, content_light=content_light, dynamic_metadata=dynamic)
+
+
+def to_rgb(frame: av.VideoFrame, colour: ColourDescription, width: int, height: int, *, deep: bool) -> np.ndarray:
+    """(height, width, 3) RGB of a decoded picture by the video's matrix and range: uint8, or with ``deep`` (and
+    more than 8 bits in the video) float32 on the 0..255 scale."""
+    if frame.format.name in _DEPTHS and (frame.width, frame.height) == (width, height):
+        rgb = _yuv420_to_rgb(frame, colour)
+        if deep and colour.deep:
+            return rgb
+        return np.add(rgb, np.float32(0.5), out=rgb).astype(np.uint8)
+    if deep and colour.deep:
+        rgb = frame.to_ndarray(format="rgb48le", width=width, height=height, src_colorspace=_SWS_MATRIX[colour.matrix],
+                               src_color_range=colour.range, interpolation=_FLAGS_DEEP)
+        return rgb.astype(np.float32) * np.float32(1 / 257)
+    return frame.to_ndarray(format="rgb24", width=width, height=height, src_colorspace=_SWS_MATRIX[colour.matrix],
+                            src_color_range=colour.range, interpolation=_FLAGS_8)
+
+
+def from_rgb(rgb: np.ndarray, colour: ColourDescription, pix_fmt: str) -> av.VideoFrame:
+    """A 4:2:0 picture in ``pix_fmt`` (yuv420p, yuv420p10le, yuv420p12le; even sizes) from RGB (uint8, or float32 on
+    the 0..255 scale), by the video's matrix and range (exactly, rounded), tagged with its description."""
+    depth = _DEPTHS[pix_fmt]
+    kr, kb = _KR_KB.get(colour.matrix, _KR_KB[BT601])
+    rgb = np.asarray(rgb, np.float32) * np.float32(1 / 255)
+    luma = rgb @ np.array([kr, 1 - kr - kb, kb], np.float32)
+    # Chroma of 2x2 blocks, sited left (MPEG-2/H.264's default): [1 2 1] / 4 across, the two rows averaged.
+    pair = (rgb[0::2] + rgb[1::2]) * np.float32(0.5)
+    left = np.concatenate([pair[:, :1], pair[:, 1:-1:2]], axis=1)
+    block = (left + 2 * pair[:, 0::2] + pair[:, 1::2]) * np.float32(0.25)
+    block_luma = block @ np.array([kr, 1 - kr - kb, kb], np.float32)
+    cb = (block[..., 2] - block_luma) * np.float32(0.5 / (1 - kb))
+    cr = (block[..., 0] - block_luma) * np.float32(0.5 / (1 - kr))
+    scale = float(2 ** (depth - 8))
+    if colour.range == FULL:
+        top = 2 ** depth - 1
+        planes = (luma * top, cb * top + 128 * scale, cr * top + 128 * scale)
+    else:
+        planes = (luma * (219 * scale) + 16 * scale, cb * (224 * scale) + 128 * scale, cr * (224 * scale) + 128 * scale)
+    frame = av.VideoFrame(rgb.shape[1], rgb.shape[0], pix_fmt)
+    dtype = np.uint8 if depth == 8 else np.uint16
+    for plane, values in zip(frame.planes, planes):
+        stored = np.frombuffer(plane, dtype).reshape(plane.height, -1)[:, :plane.width]
+        np.clip(values + np.float32(0.5), 0, 2 ** depth - 1, out=stored, casting="unsafe")
+    frame.colorspace, frame.color_range = colour.matrix, colour.range
+    frame.color_primaries, frame.color_trc = colour.primaries, colour.transfer
+    return frame
+
+
+def _yuv420_to_rgb(frame: av.VideoFrame, colour: ColourDescription) -> np.ndarray:
+    """RGB float32 (0..255) of a planar 4:2:0 picture, exactly by the matrix and range (swscale's 10-bit paths are
+    ~0.4% off in gain both ways, its 8-bit full range half a level off in chroma). Chroma is interpolated as
+    sited: left, between two rows (as from_rgb writes it)."""
+    depth = _DEPTHS[frame.format.name]
+    dtype = np.uint8 if depth == 8 else np.uint16
+    planes = [np.frombuffer(p, dtype).reshape(p.height, -1)[:, :p.width].astype(np.float32) for p in frame.planes]
+    scale = float(2 ** (depth - 8))
+    if colour.range == FULL:
+        top = np.float32(1 / (2 ** depth - 1))
+        luma, cb, cr = planes[0] * top, (planes[1] - 128 * scale) * top, (planes[2] - 128 * scale) * top
+    else:
+        luma = (planes[0] - np.float32(16 * scale)) * np.float32(1 / (219 * scale))
+        cb, cr = ((c - np.float32(128 * scale)) * np.float32(1 / (224 * scale)) for c in planes[1:])
+    height, width = luma.shape
+    chroma = np.stack([cb, cr], -1)
+    # rows: each chroma row sits between two luma rows: 3/4 of the nearer chroma row, 1/4 of the other
+    above = np.concatenate([chroma[:1], chroma[:-1]])
+    below = np.concatenate([chroma[1:], chroma[-1:]])
+    rows = np.empty((2 * chroma.shape[0], chroma.shape[1], 2), np.float32)
+    rows[0::2] = np.float32(0.75) * chroma + np.float32(0.25) * above
+    rows[1::2] = np.float32(0.75) * chroma + np.float32(0.25) * below
+    # columns: sited on the even luma columns; the odd ones halfway
+    full = np.empty((rows.shape[0], 2 * rows.shape[1], 2), np.float32)
+    full[:, 0::2] = rows
+    full[:, 1::2] = (rows + np.concatenate([rows[:, 1:], rows[:, -1:]], axis=1)) * np.float32(0.5)
+    full = full[:height, :width]
+    kr, kb = _KR_KB.get(colour.matrix, _KR_KB[BT601])
+    red = luma + np.float32(2 * (1 - kr)) * full[..., 1]
+    blue = luma + np.float32(2 * (1 - kb)) * full[..., 0]
+    green = (luma - np.float32(kr) * red - np.float32(kb) * blue) * np.float32(1 / (1 - kr - kb))
+    rgb = np.stack([red, green, blue], -1)
+    return np.clip(rgb * np.float32(255), 0, 255, out=rgb)
+
+
+def tag_stream(context: av.codec.context.CodecContext, colour: ColourDescription) -> None:
+    """The encoder writes the description into the stream (VUI: matrix, range, primaries, transfer)."""
+    context.colorspace = colour.matrix
+    context.color_range = colour.range
+    context.color_primaries = colour.primaries
+    context.color_trc = colour.transfer
+
+
+# ------------------------------------------------------------------------------------------------ display
+
+# Linear BT.2020 RGB -> linear BT.709 RGB (ITU-R BT.2087).
+_BT2020_TO_BT709 = np.array([[1.6605, -0.5876, -0.0728], [-0.1246, 1.1329, -0.0083], [-0.0182, -0.1006, 1.1187]],
+                            np.float32)
+SDR_WHITE_NITS = 203.0  # ITU-R BT.2408: HDR reference white, shown as SDR's white
+
+
+def _pq_to_nits(code: np.ndarray) -> np.ndarray:
+    m1, m2, c1, c2, c3 = 2610 / 16384, 2523 / 4096 * 128, 3424 / 4096, 2413 / 4096 * 32, 2392 / 4096 * 32
+    p = np.power(np.clip(code, 0, 1), 1 / m2)
+    return 10000 * np.power(np.maximum(p - c1, 0) / (c2 - c3 * p), 1 / m1)
+
+
+def _hlg_to_nits(code: np.ndarray, peak: float = 1000.0) -> np.ndarray:
+    """HLG inverse OETF, then the OOTF's system gamma 1.2 on each channel (a 1000 cd/m2 display)."""
+    a, b, c = 0.17883277, 0.28466892, 0.55991073
+    code = np.clip(code, 0, 1)
+    scene = np.where(code <= 0.5, code * code / 3, (np.exp((code - c) / a) + b) / 12)
+    return peak * np.power(scene, 1.2)
+
+
+def _lut(colour: ColourDescription) -> np.ndarray | None:
+    """Code value (4096 steps over 0..255) -> linear light relative to SDR white, for HDR and BT.2020 video."""
+    code = np.linspace(0, 1, 4096)
+    if colour.transfer == PQ:
+        nits = _pq_to_nits(code)
+    elif colour.transfer == HLG:
+        nits = _hlg_to_nits(code)
+    elif colour.primaries == 9:
+        return np.power(code, 2.4).astype(np.float32)  # BT.1886 display gamma
+    else:
+        return None
+    linear = nits / SDR_WHITE_NITS
+    # As it is up to 75% of SDR white, then an exponential shoulder towards white (slope 1 at the knee): diffuse
+    # white shows at 93% of white, highlights above it are compressed rather than clipped.
+    knee = 0.75
+    shoulder = knee + (1 - knee) * (1 - np.exp(-(np.maximum(linear, knee) - knee) / (1 - knee)))
+    return np.where(linear <= knee, linear, shoulder).astype(np.float32)
+
+
+def display_rgb(rgb: np.ndarray, colour: ColourDescription) -> np.ndarray:
+    """uint8 RGB of a frame as a person sees it on an ordinary (BT.709 / sRGB) screen: the frame as it is for
+    BT.601/709 video; BT.2020 primaries mapped into BT.709, PQ and HLG tone-mapped (HDR reference white, 203 cd/m2,
+    near SDR white; brighter highlights compressed). A display's view, not a colorimetric conversion."""
+    lut = _lut(colour)
+    if lut is None:
+        if rgb.dtype == np.uint8:
+            return rgb
+        return np.clip(np.asarray(rgb, np.float32) + np.float32(0.5), 0, 255).astype(np.uint8)
+    index = np.clip(np.asarray(rgb, np.float32) * np.float32(4095 / 255) + np.float32(0.5), 0, 4095).astype(np.int16)
+    linear = lut[index]
+    if colour.primaries == 9:
+        linear = linear @ _BT2020_TO_BT709.T
+    encoded = np.power(np.clip(linear, 0, 1), np.float32(1 / 2.4))
+    return (encoded * np.float32(255) + np.float32(0.5)).astype(np.uint8)

@@ -1,0 +1,199 @@
+"""Faithful colour: the output keeps the input's matrix, range, primaries, transfer, bit depth and HDR metadata.
+
+Tiny clips (160x96, 16 frames) with a shaking camera over a still scene, tagged BT.601, BT.709, full range, and
+BT.2020 10-bit HLG and PQ (the last with mastering display metadata), go through the reader/writer alone and
+through ``--mode none``, ``crop`` and ``full``. The scene's centre is a flat saturated patch wider than the shake,
+so its mean colour is known in every output frame whatever the warp; each file is decoded by its own tags (the
+mean Y'CbCr of the region, turned into R'G'B' by the tagged matrix and range: the map is affine, so the mean
+converts exactly), independently of the pipeline's own conversions.
+"""
+
+from __future__ import annotations
+
+import av
+import numpy as np
+import pytest
+
+from ffviz import cli
+from pipeline.runtime import colour as colours
+from pipeline.runtime import video_io
+from pipeline.runtime.colour import ColourDescription
+
+W, H, N = 160, 96, 16
+PATCH = (slice(24, 72), slice(44, 116))  # the flat patch (rows, columns); the shake is at most 5 px
+REGION = (slice(40, 56), slice(64, 96))  # the region measured, well inside the patch in every frame
+PATCH_RGB = (201.3, 58.6, 41.2)  # R'G'B' code values, 0..255 scale (fractions: 10-bit clips keep them)
+MASTERING = ((0.68, 0.32), (0.265, 0.69), (0.15, 0.06), (0.3127, 0.329), (0.0001, 1000.0))  # P3 in BT.2020, 1000 nits
+
+CLIPS = {
+    "bt601": ("libx264", "yuv420p", ColourDescription(matrix=6, range=1, primaries=6, transfer=6)),
+    "bt709": ("libx264", "yuv420p", ColourDescription(matrix=1, range=1, primaries=1, transfer=1)),
+    "full_range": ("libx264", "yuv420p", ColourDescription(matrix=1, range=2, primaries=1, transfer=13)),
+    "bt2020_hlg_10bit": ("libx265", "yuv420p10le",
+                         ColourDescription(matrix=9, range=1, primaries=9, transfer=18, bit_depth=10)),
+    "bt2020_pq_10bit": ("libx265", "yuv420p10le",
+                        ColourDescription(matrix=9, range=1, primaries=9, transfer=16, bit_depth=10,
+                                          mastering=MASTERING, content_light=(1000, 400))),
+}
+
+
+def scene(t: int) -> np.ndarray:
+    """Frame t: a textured still scene seen by a camera shaking by a known few pixels, float32 0..255."""
+    dx, dy = 4 * np.sin(1.7 * t), 3 * np.cos(2.3 * t)
+    y, x = np.mgrid[0:H, 0:W].astype(np.float32)
+    x, y = x + dx, y + dy
+    rgb = np.stack([128 + 90 * np.sin(x / 5) * np.cos(y / 7), 128 + 90 * np.cos(y / 4 + x / 9),
+                    128 + 70 * np.sin((x - y) / 6)], -1)
+    inside = (np.abs(x - 80) < 36 - 5) & (np.abs(y - 48) < 24 - 5)  # moves with the scene
+    rgb[inside] = PATCH_RGB
+    return rgb.astype(np.float32)
+
+
+def make_clip(path, kind: str) -> None:
+    codec, pix_fmt, description = CLIPS[kind]
+    options = {"crf": "8", "preset": "fast"}
+    if codec == "libx265":
+        options["x265-params"] = ":".join(["log-level=error", *description.x265_hdr_params()])
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream(codec, rate=25, options=options)
+        stream.width, stream.height, stream.pix_fmt = W, H, pix_fmt
+        colours.tag_stream(stream.codec_context, description)
+        for t in range(N):
+            frame = colours.from_rgb(scene(t), description, pix_fmt)
+            frame.pts = t
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+
+
+@pytest.fixture(scope="module", params=list(CLIPS))
+def clip(request, tmp_path_factory):
+    path = tmp_path_factory.mktemp("colour") / f"{request.param}.mp4"
+    make_clip(path, request.param)
+    return request.param, path
+
+
+_KR_KB = {1: (0.2126, 0.0722), 9: (0.2627, 0.0593)}  # anything else: BT.601's (0.299, 0.114)
+
+
+def stream_tags(path) -> dict:
+    """The colour tags and depth of the file's video stream, and its first frame's HDR metadata."""
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        frame = next(container.decode(stream))
+        described = colours.describe(frame)
+        context = stream.codec_context
+        return {"matrix": int(context.colorspace), "range": int(context.color_range),
+                "primaries": int(context.color_primaries), "transfer": int(context.color_trc),
+                "depth": described.bit_depth, "mastering": described.mastering,
+                "content_light": described.content_light}
+
+
+def mean_rgb(path) -> tuple[np.ndarray, int]:
+    """Per frame, the mean R'G'B' (0..1) of REGION decoded by the file's own tags; and its bit depth."""
+    means = []
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        context = stream.codec_context
+        kr, kb = _KR_KB.get(int(context.colorspace), (0.299, 0.114))
+        full = int(context.color_range) == 2
+        for frame in container.decode(stream):
+            depth = frame.format.components[0].bits
+            dtype = np.uint16 if depth > 8 else np.uint8
+            planes = [np.frombuffer(p, dtype).reshape(p.height, p.line_size // dtype().itemsize)[:, :p.width]
+                      for p in frame.planes]
+            rows, cols = REGION
+            luma = planes[0][rows, cols].mean()
+            chroma_box = (slice(rows.start // 2, rows.stop // 2), slice(cols.start // 2, cols.stop // 2))
+            cb, cr = planes[1][chroma_box].mean(), planes[2][chroma_box].mean()
+            s = 2 ** (depth - 8)
+            if full:
+                y, u, v = luma / (255 * s), (cb - 128 * s) / (255 * s), (cr - 128 * s) / (255 * s)
+            else:
+                y, u, v = (luma - 16 * s) / (219 * s), (cb - 128 * s) / (224 * s), (cr - 128 * s) / (224 * s)
+            r, b = y + 2 * (1 - kr) * v, y + 2 * (1 - kb) * u
+            g = (y - kr * r - kb * b) / (1 - kr - kb)
+            means.append((r, g, b))
+    return np.array(means), depth
+
+
+def assert_faithful(input_path, output_path, kind: str) -> None:
+    tags_in, tags_out = stream_tags(input_path), stream_tags(output_path)
+    assert tags_out == tags_in, f"{kind}: {tags_out} != {tags_in}"
+    rgb_in, depth = mean_rgb(input_path)
+    rgb_out, _ = mean_rgb(output_path)
+    assert len(rgb_out) == len(rgb_in)
+    levels = 2 ** depth - 1
+    bound = 1 if depth == 8 else 4  # 1 level in 255, 4 in 1023
+    drift = np.abs(rgb_out - rgb_in).max() * levels
+    assert drift <= bound, f"{kind}: the patch's mean colour moved by {drift:.2f} of {levels} levels"
+    # and it is the colour that was put in (up to the 8-bit Y'CbCr steps: a step of Cr is 1.8 levels of R)
+    assert np.abs(rgb_in.mean(axis=0) * 255 - PATCH_RGB).max() < (1.0 if depth > 8 else 1.5)
+
+
+def test_reader_and_writer_alone_keep_tags_depth_and_colour(clip, tmp_path):
+    kind, path = clip
+    output = tmp_path / "copy.mp4"
+    with video_io.VideoReader(path, keep_depth=True) as reader:
+        description = reader.info.colour
+        assert description == ColourDescription(**{**CLIPS[kind][2].__dict__,
+                                                   "pix_fmt": description.pix_fmt})  # read once, as written
+        with video_io.VideoWriter(output, like=reader.info) as writer:
+            for frame in reader:
+                assert frame.rgb.dtype == (np.float32 if description.deep else np.uint8)
+                writer.write(frame.rgb, pts=frame.pts)
+    assert writer.warnings == []
+    assert_faithful(path, output, kind)
+
+
+@pytest.mark.parametrize("mode", ["none", "crop", "full"])
+def test_every_mode_keeps_tags_depth_and_colour(clip, mode, tmp_path, capsys):
+    kind, path = clip
+    output = tmp_path / f"{mode}.mp4"
+    assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", mode]) == 0
+    assert_faithful(path, output, kind)
+    assert "warning" not in capsys.readouterr().err.lower()
+
+
+def test_8bit_reader_still_gives_uint8_by_the_input_matrix(tmp_path):
+    """Without keep_depth a 10-bit clip reads as uint8, by its own (BT.2020) matrix: within a level of the truth."""
+    path = tmp_path / "hlg.mp4"
+    make_clip(path, "bt2020_hlg_10bit")
+    with video_io.VideoReader(path) as reader:
+        frame = next(iter(reader))
+    assert frame.rgb.dtype == np.uint8
+    assert np.abs(frame.rgb[REGION].reshape(-1, 3).mean(axis=0) - PATCH_RGB).max() < 1.0
+
+
+def test_a_codec_without_10_bits_says_so_in_one_line_and_keeps_the_tags(tmp_path, capsys):
+    path = tmp_path / "hlg.mp4"
+    make_clip(path, "bt2020_hlg_10bit")
+    output = tmp_path / "out.mp4"
+    assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", "none", "--codec", "mpeg4"]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if "cannot store 10-bit" in line]
+    assert len(lines) == 1
+    tags = stream_tags(output)
+    assert tags["depth"] == 8
+    assert (tags["matrix"], tags["range"], tags["primaries"], tags["transfer"]) == (9, 1, 9, 18)
+    rgb_in, _ = mean_rgb(path)
+    rgb_out, _ = mean_rgb(output)
+    assert np.abs(rgb_out - rgb_in).max() * 255 <= 1.0  # 8 bits of the same colour
+
+
+def test_display_rgb_shows_hdr_white_near_sdr_white_and_leaves_sdr_alone():
+    sdr = ColourDescription(matrix=1, primaries=1, transfer=1)
+    frame = scene(0)
+    assert np.array_equal(colours.display_rgb(np.round(frame).astype(np.uint8), sdr), np.round(frame).astype(np.uint8))
+    # HDR reference white (203 cd/m2): PQ code 0.5807, HLG 0.75; a grey stays grey, near SDR white, not clipped
+    for transfer, code in ((16, 0.5807), (18, 0.75)):
+        hdr = ColourDescription(matrix=9, primaries=9, transfer=transfer, bit_depth=10)
+        white = colours.display_rgb(np.full((2, 2, 3), code * 255, np.float32), hdr)[0, 0]
+        assert len(set(white.tolist())) == 1 and 235 <= white[0] < 255
+        # brighter content is brighter still, up to white
+        peak = colours.display_rgb(np.full((2, 2, 3), 255, np.float32), hdr)[0, 0]
+        assert peak[0] > white[0]
+    # BT.2020's saturated red lies outside BT.709: shown as BT.709's most saturated red, not a dull one
+    red = colours.display_rgb(np.array([[[0.75 * 255, 0, 0]]], np.float32),
+                              ColourDescription(matrix=9, primaries=9, transfer=18, bit_depth=10))[0, 0]
+    assert red[0] > 200 and red[1] == 0 and red[2] == 0
