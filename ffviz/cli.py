@@ -88,7 +88,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, metavar="OUTPUT",
                    help="video file to write: .mp4, .mov or .mkv (same frame count, rate and timestamps; audio copied)")
     _add_stabilize_options(p)
-    p.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (default: refuse)")
+    p.add_argument("--preview", type=float, default=None, metavar="SECONDS",
+                   help="stabilize only SECONDS of INPUT, from --start, to try settings before a long run: OUTPUT "
+                        "(and --compare) hold just that stretch, starting at 0 s, with its audio (default: all of it)")
+    p.add_argument("--start", type=float, default=None, metavar="SECONDS",
+                   help="begin at this time of INPUT, in seconds; with --preview, the stretch previewed "
+                        "(default: 0, the beginning)")
+    p.add_argument("--compare", type=Path, default=None, metavar="FILE",
+                   help="also write INPUT and OUTPUT side by side to FILE, with their camera paths, as "
+                        "`ffviz compare` does (default: none)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUTPUT (and --compare FILE) if it exists (default: refuse)")
 
     p = commands.add_parser("demo", help="make a synthetic shaky video with known camera motion, stabilize it, "
                                          "check against the truth",
@@ -157,6 +167,9 @@ def build_parser() -> argparse.ArgumentParser:
     from ffviz.batch import add_parser as add_batch_parser  # imports no Ray: that happens when a batch runs
 
     add_batch_parser(commands, _add_stabilize_options)
+    from ffviz.compare import add_parser as add_compare_parser
+
+    add_compare_parser(commands)
     from ffviz.bench import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
 
     add_bench_parser(commands)
@@ -328,6 +341,12 @@ def cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    from ffviz.compare import cmd_compare as run_compare
+
+    return run_compare(args)
+
+
 def cmd_batch(args: argparse.Namespace) -> int:
     from ffviz.batch import cmd_batch as run_batch
 
@@ -341,7 +360,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics, "view": cmd_view,
-            "snapshot": cmd_snapshot,
+            "snapshot": cmd_snapshot, "compare": cmd_compare,
             "figures": cmd_figures, "batch": cmd_batch, "bench": cmd_bench}
 
 

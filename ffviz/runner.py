@@ -20,6 +20,7 @@ from pipeline import stabilize as stab
 from pipeline.runtime import video_io
 from pipeline.errors import ConfigError
 from pipeline.runtime.observer import Observer, Observers
+from pipeline.runtime.source import FileSource
 
 DEFAULT_RECORDINGS = Path("recordings")  # where --rrd without a path writes INPUT_STEM.rrd
 MAX_RADIUS = 100_000  # frames; the smoothing kernel is allocated at 2k+1 taps
@@ -144,10 +145,23 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
 
         recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80,
                                  trace_frames=args.frames, live_url=live.grpc_url if live else None)
+    from ffviz import compare
+
+    start_s, end_s = compare.preview_range(args)
+    compare_path = getattr(args, "compare", None)
     try:
-        report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
-                                progress=tqdm_progress, overwrite=overwrite, encoding=encoding,
-                                workers=getattr(args, "workers", None))
+        if compare_path is not None:  # refused before the long run, not after it
+            compare.check_compare_path(compare_path, input_path, output_path, overwrite=overwrite)
+        if start_s is None:
+            report = stab.stabilize(input_path, output_path, config, observer=Observers(recorder, *observers),
+                                    progress=tqdm_progress, overwrite=overwrite, encoding=encoding,
+                                    workers=getattr(args, "workers", None))
+        else:  # --preview / --start: only that stretch of the input is read, and written from 0 s on
+            source = FileSource(input_path, start_s=start_s, end_s=end_s)
+            video_io.check_output_path(output_path, input_path, overwrite=overwrite)
+            report = stab.stabilize_source(source, output_path, config, observer=Observers(recorder, *observers),
+                                           progress=tqdm_progress, encoding=encoding,
+                                           workers=getattr(args, "workers", None))
     except BaseException:
         if recorder is not None:
             recorder.abort()
@@ -155,8 +169,12 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
             live.stop()
         raise
     _print_report(report, rrd_path)
+    written = [(report.output_path, "stabilized video")]
+    if compare_path is not None:
+        compare.stabilize_comparison(input_path, output_path, compare_path, start_s, end_s, overwrite=overwrite)
+        written.append((compare_path, "side by side"))
     if final_line:
-        print(written_line([(report.output_path, "stabilized video")], rrd_path), flush=True)
+        print(written_line(written, rrd_path), flush=True)
     if live is not None:
         print(f"live view still serving at {live.url} (Ctrl-C to stop)", flush=True)
         live.wait()

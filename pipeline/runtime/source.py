@@ -27,14 +27,21 @@ class FrameSource(Protocol):
 
 
 class FileSource:
-    def __init__(self, path: Path | str) -> None:
+    """A video file's frames; ``start_s``/``end_s``: only that part of it (seconds; see video_io.VideoReader), and
+    ``info.clip`` says so, so the output and its audio start at the first frame read (a preview)."""
+
+    def __init__(self, path: Path | str, *, start_s: float | None = None, end_s: float | None = None) -> None:
         self.path = Path(path)
         self.info = video_io.probe_video(self.path)
+        self._range = (start_s, end_s)
+        if start_s is not None or end_s is not None:
+            self.info = video_io.clipped_info(self.info, start_s, end_s)
         self._warnings: list[str] = []
         self._reader: video_io.VideoReader | None = None
 
     def frames(self) -> Iterator[video_io.Frame]:
-        with video_io.VideoReader(self.path, keep_depth=True) as reader:
+        start_s, end_s = self._range
+        with video_io.VideoReader(self.path, keep_depth=True, start_s=start_s, end_s=end_s) as reader:
             self._reader = reader
             try:
                 yield from reader

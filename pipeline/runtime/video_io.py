@@ -9,7 +9,10 @@ raised as InputError or OutputError with a one-line message that names the file.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
+import itertools
+import math
 import os
 import secrets
 from collections.abc import Iterator
@@ -68,6 +71,9 @@ class VideoInfo:
     codec: str
     time_base: Fraction  # of the video stream; Frame.pts counts in it
     colour: ColourDescription = ColourDescription()  # range, matrix, primaries, transfer, depth (first frame's)
+    # (start, end) seconds (Frame.time_s) when only that part of the file is read (clipped_info); the writer
+    # then starts the output, and the audio it copies, at the first frame and ends the audio at the last.
+    clip: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -180,8 +186,9 @@ class _Pictures:
     """
 
     def __init__(self, container: av.container.InputContainer, stream: av.VideoStream, warnings: list[str],
-                 path: Path) -> None:
+                 path: Path, check_index: bool = True) -> None:
         self._container, self._stream, self._warnings, self._path = container, stream, warnings, path
+        self._check_index_at_end = check_index  # off after a seek: the packets before it were never read
         self._pending: list[int] = []  # heap: pts of packets sent to the decoder, picture not out yet
         self._timed = True  # every packet has a pts
         self._last_good: av.VideoFrame | None = None
@@ -233,7 +240,8 @@ class _Pictures:
         if self._timed:  # packets still waiting for a picture at the end were lost too
             while self._pending:
                 yield from self._stand_in(heapq.heappop(self._pending))
-        self._check_index()
+        if self._check_index_at_end:
+            self._check_index()
 
     def _place(self, frame: av.VideoFrame) -> Iterator[tuple[int | None, av.VideoFrame]]:
         pts = frame.pts
@@ -357,6 +365,27 @@ def count_frames(path: str | os.PathLike[str]) -> int:
         return sum(1 for _ in reader.decoded_frames())
 
 
+def clipped_info(info: VideoInfo, start_s: float | None, end_s: float | None) -> VideoInfo:
+    """``info`` for the part of the video from ``start_s`` to ``end_s`` seconds (None: its start / end), as
+    VideoReader(start_s=..., end_s=...) reads it; frame_count and duration_s are estimates (rate x length)."""
+    start = float(start_s or 0.0)
+    if not math.isfinite(start) or start < 0:
+        raise ConfigError(f"start time must be 0 s or later, not {start_s}")
+    if end_s is not None and not (math.isfinite(end_s) and end_s > start):
+        raise ConfigError(f"end time {end_s:g} s must be after the start time {start:g} s")
+    if info.duration_s > 0 and start >= info.duration_s:
+        raise InputError(f"start time {start:g} s is past the end of {info.path} ({info.duration_s:.2f} s long)")
+    end = float(end_s) if end_s is not None else math.inf
+    if info.duration_s > 0:
+        end = min(end, info.duration_s)
+    if math.isinf(end):  # the container does not say how long it is
+        count = max(1, info.frame_count - math.floor(start * info.fps))
+        return dataclasses.replace(info, frame_count=count, duration_s=0.0, clip=(start, end))
+    count = max(1, math.ceil((end - start) * info.fps - 0.25))
+    return dataclasses.replace(info, frame_count=min(count, info.frame_count or count), duration_s=end - start,
+                               clip=(start, end))
+
+
 class VideoReader:
     """Streams a video as upright RGB Frames, one at a time. Single pass; use as a context manager.
 
@@ -364,23 +393,57 @@ class VideoReader:
     so frame count and timing are the file's; each such frame adds a line to `warnings`.
     RGB by the video's own matrix and range (info.colour); ``keep_depth``: video of more than 8 bits comes as
     float32 RGB on the 0..255 scale (else uint8 always).
+    ``start_s``/``end_s``: only the frames from that time up to (not including) this one (seconds, Frame.time_s,
+    a quarter frame's leeway), numbered from 0, with their times in the file; it seeks to the key frame
+    before ``start_s`` rather than decoding everything before it.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, keep_depth: bool = False) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, keep_depth: bool = False, start_s: float | None = None,
+                 end_s: float | None = None) -> None:
         self.info: VideoInfo = probe_video(path)
-        self.keep_depth = keep_depth
+        if start_s is not None or end_s is not None:
+            self.info = clipped_info(self.info, start_s, end_s)
         self.warnings: list[str] = []
+        self.keep_depth = keep_depth
+        self._start_s, self._end_s = start_s, end_s
         self._container = _open_input(self.info.path)
         self._stream = _video_stream(self._container, self.info.path)
         self._stream.codec_context.thread_type = "AUTO"  # frame + slice threads: much faster on 720p
         self._started = False
+        self._seeked = False
 
     def decoded_frames(self) -> Iterator[tuple[int | None, av.VideoFrame]]:
         """(pts, raw PyAV frame) before RGB conversion and rotation; a lost frame's stand-in has its pts."""
         if self._started:
             raise RuntimeError("VideoReader reads once; open a new one to read again")
         self._started = True
+        if self._start_s:
+            seeked = self._seeked_pictures(self._start_s)
+            if seeked is not None:
+                return seeked
         return _decoded_frames(self._container, self._stream, self.warnings, self.info.path)
+
+    def _seeked_pictures(self, start_s: float) -> Iterator[tuple[int | None, av.VideoFrame]] | None:
+        """Pictures from the key frame at or before ``start_s``; None (and the file reopened at its start) where
+        the seek lands after it or the pictures carry no timestamps (a container without an index)."""
+        stream = self._stream
+        target = (stream.start_time or 0) + math.floor(start_s / self.info.time_base)
+        seen = len(self.warnings)
+        try:
+            self._container.seek(target, stream=stream, backward=True)
+            pictures = iter(_Pictures(self._container, stream, self.warnings, self.info.path, check_index=False))
+            first = next(pictures, None)
+        except _AV_ERRORS:
+            first = None
+        if first is not None and first[0] is not None and first[0] <= target:
+            self._seeked = True
+            return itertools.chain([first], pictures)
+        del self.warnings[seen:]
+        self._container.close()
+        self._container = _open_input(self.info.path)
+        self._stream = _video_stream(self._container, self.info.path)
+        self._stream.codec_context.thread_type = "AUTO"
+        return None
 
     def __iter__(self) -> Iterator[Frame]:
         info = self.info
@@ -388,12 +451,27 @@ class VideoReader:
         stored_w, stored_h = info.width, info.height
         if info.rotation in (90, 270):
             stored_w, stored_h = stored_h, stored_w
+        leeway = 0.25 / float(info.fps)
+        first_s = -math.inf if self._start_s is None else self._start_s - leeway
+        stop_s = math.inf if self._end_s is None else self._end_s - leeway
+        index = 0
+        pictures = self.decoded_frames()
         start = self._stream.start_time or 0
-        for index, (pts, frame) in enumerate(self.decoded_frames()):
+        for decoded, (pts, frame) in enumerate(pictures):
             pts = pts if pts is not None else frame.dts
-            time_s = float((pts - start) * info.time_base) if pts is not None else float(index / info.fps)
+            if pts is not None:
+                time_s = float((pts - start) * info.time_base)
+            elif not self._seeked:
+                time_s = float(decoded / info.fps)
+            else:
+                continue  # after a seek, a picture without a timestamp cannot be placed
+            if time_s < first_s:
+                continue
+            if time_s >= stop_s:
+                break
             rgb = colours.to_rgb(frame, info.colour, stored_w, stored_h, deep=self.keep_depth)
             yield Frame(index=index, pts=pts, time_s=time_s, rgb=_upright(rgb, info.rotation))
+            index += 1
 
     def close(self) -> None:
         self._container.close()
@@ -461,7 +539,8 @@ class _AudioPassthrough:
     """Feeds the audio of `source` into `output`, copied when the codec allows, else as AAC.
 
     Packets are read lazily and muxed up to the time of the latest video frame, so memory stays
-    bounded; FFmpeg's interleaver absorbs the encoder's lookahead delay.
+    bounded; FFmpeg's interleaver absorbs the encoder's lookahead delay. After ``start_at(t)`` only the audio from
+    t on (whole packets or decoded frames) is muxed, moved t earlier: the video was cut at t.
     """
 
     def __init__(self, source: Path, output: av.container.OutputContainer, warnings: list[str]) -> None:
@@ -473,6 +552,7 @@ class _AudioPassthrough:
         self._pending: av.Packet | None = None
         self._next_sample: int | None = None  # transcoding: pts of the next sample
         self._done = self._in is None
+        self._start_s: float | None = None  # start_at: audio before it is dropped, the rest moved back by it
         self.copied = False
         if self._in is None:
             return
@@ -498,6 +578,21 @@ class _AudioPassthrough:
             self._warnings.append(f"{self._source_path.name}: audio stopped early: {_reason(error)}")
             return None
 
+    def start_at(self, time_s: float) -> None:
+        """Drop the audio before ``time_s`` (seconds, absolute: pts x time base) and start the rest at 0."""
+        self._start_s = time_s
+
+    def finish(self, end_s: float | None) -> None:
+        """Mux the audio up to ``end_s`` (None: all that is left) and flush the encoder."""
+        if end_s is None:
+            self.mux_until(None)
+            return
+        self.mux_until(end_s)
+        if not self._done and not self.copied:
+            self._transcode(None)  # flush the decoder, then the encoder
+            self._mux_encoded(None)
+        self._done = True
+
     def mux_until(self, time_s: float | None) -> None:
         """Mux audio up to time_s seconds (everything left when None)."""
         while not self._done:
@@ -517,6 +612,12 @@ class _AudioPassthrough:
                 self._pending = packet
                 return
             if self.copied:
+                if self._start_s is not None:
+                    if stamp * packet.time_base < self._start_s:
+                        continue
+                    shift = round(self._start_s / packet.time_base)
+                    packet.pts = None if packet.pts is None else packet.pts - shift
+                    packet.dts = None if packet.dts is None else packet.dts - shift
                 packet.stream = self._out
                 self._output.mux(packet)
             else:
@@ -532,6 +633,10 @@ class _AudioPassthrough:
             # Stamp by sample count: a millisecond time base (MKV) would jitter AAC's timestamps.
             if self._next_sample is None:
                 start = frame.pts * frame.time_base if frame.pts is not None else 0
+                if self._start_s is not None:
+                    if start + Fraction(frame.samples, frame.sample_rate) <= self._start_s:
+                        continue  # wholly before the cut
+                    start = max(start - Fraction(self._start_s), 0)
                 self._next_sample = round(start * frame.sample_rate)
             frame.pts, frame.time_base = self._next_sample, Fraction(1, frame.sample_rate)
             self._next_sample += frame.samples
@@ -623,6 +728,9 @@ class VideoWriter:
         # Default spacing when write() gets no timestamp: one frame at the input's rate.
         self._frame_ticks = max(1, round(1 / (like.fps * like.time_base)))
         self._last_pts: int | None = None
+        # like.clip: the frames are part of a file; the output starts at the first one (its pts become 0).
+        self._clipped = like.clip is not None
+        self._pts_offset: int | None = None
         self._temp: Path | None = None
         self._container: av.container.OutputContainer | None = None
         self._audio: _AudioPassthrough | None = None
@@ -712,11 +820,16 @@ class VideoWriter:
         if rgb.dtype not in (np.uint8, np.float32) or rgb.shape != (self.height, self.width, 3):
             expected = (self.height, self.width, 3)
             raise ValueError(f"expected a uint8 or float32 frame of shape {expected}, got {rgb.dtype} {rgb.shape}")
+        if pts is None and time_s is not None:
+            pts = round(time_s / self._time_base)
+        if pts is not None and self._clipped:
+            if self._pts_offset is None:
+                self._pts_offset = pts
+                if self._audio is not None:
+                    self._audio.start_at(float(pts * self._time_base))
+            pts -= self._pts_offset
         if pts is None:
-            if time_s is not None:
-                pts = round(time_s / self._time_base)
-            else:
-                pts = 0 if self._last_pts is None else self._last_pts + self._frame_ticks
+            pts = 0 if self._last_pts is None else self._last_pts + self._frame_ticks
         if self._last_pts is not None and pts <= self._last_pts:
             # x264 and the muxer need strictly increasing timestamps; nudge rather than fail.
             self.warnings.append(f"pts {pts} is not after {self._last_pts}; wrote it at {self._last_pts + 1}")
@@ -731,7 +844,7 @@ class VideoWriter:
             for packet in self._video.encode(frame):
                 self._container.mux(packet)
             if self._audio is not None:
-                self._audio.mux_until(float(pts * self._time_base))
+                self._audio.mux_until(float((pts + (self._pts_offset or 0)) * self._time_base))
         except _AV_ERRORS as error:
             self.abort()
             raise OutputError(f"cannot write {self.path}: {_reason(error)}") from None
@@ -744,7 +857,10 @@ class VideoWriter:
             for packet in self._video.encode(None):
                 self._container.mux(packet)
             if self._audio is not None:
-                self._audio.mux_until(None)
+                end_s = None
+                if self._clipped and self._last_pts is not None:  # the audio ends with the last frame's time
+                    end_s = float((self._last_pts + (self._pts_offset or 0) + self._frame_ticks) * self._time_base)
+                self._audio.finish(end_s)
                 self._audio.close()
                 self._audio = None
             self._container.close()
