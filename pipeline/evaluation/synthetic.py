@@ -78,6 +78,9 @@ class SyntheticConfig:
     jitter_deg: float = 1.0  # roll, degrees
     jitter_scale: float = 0.01  # relative zoom
     jitter_band_hz: tuple[float, float] = (1.5, 6.0)  # pass band of the jitter spectrum
+    # Gain of the jitter over time: equal stretches of the clip, eased between by a raised cosine over a tenth of
+    # the clip (e.g. (0.1, 1.0): a calm first half, a shaky second). () -> 1 throughout (the stds above hold).
+    jitter_envelope: tuple[float, ...] = ()
     # Intentional (smooth) motion.
     pan_px_per_frame: float = 1.5  # steady horizontal pan
     drift_px: float = 8.0  # amplitude of the slow sinusoidal drift (x; y gets 0.6x this)
@@ -627,7 +630,23 @@ def _drift_and_jitter(cfg: SyntheticConfig, rng: np.random.Generator, n: int, fp
               cfg.jitter_px * _band_limited_noise(rng, n, fps, band),
               math.radians(cfg.jitter_deg) * _band_limited_noise(rng, n, fps, band),
               cfg.jitter_scale * _band_limited_noise(rng, n, fps, band))
+    if cfg.jitter_envelope:
+        gain = jitter_gain(cfg.jitter_envelope, n)
+        jitter = tuple(gain * j for j in jitter)
     return drift, jitter
+
+
+def jitter_gain(envelope: tuple[float, ...], n: int) -> np.ndarray:
+    """(n,) the jitter's gain per frame for ``SyntheticConfig.jitter_envelope``: each value holds over its
+    stretch of the clip, the changes eased by a raised cosine over a tenth of the clip around each boundary."""
+    levels = np.asarray(envelope, np.float64)
+    t = (np.arange(n) + 0.5) / max(n, 1) * len(levels)  # position in stretches
+    gain = np.full(n, levels[0])
+    half = 0.05 * len(levels)  # half the ease, in stretches
+    for k in range(1, len(levels)):
+        u = np.clip((t - (k - half)) / (2 * half), 0.0, 1.0)
+        gain += (levels[k] - levels[k - 1]) * 0.5 * (1.0 - np.cos(math.pi * u))
+    return gain
 
 
 def _world_canvas(cfg: SyntheticConfig, *views: np.ndarray) -> tuple[np.ndarray, float, float]:

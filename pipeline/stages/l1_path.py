@@ -56,8 +56,8 @@ class L1PathConfig:
                    margin_scale=TRIPOD_MARGIN_SCALE, weights=(1.0, 0.0, 0.0))
 
     def __post_init__(self) -> None:
-        if not (self.margin_fraction > 0 and self.margin_deg > 0 and self.margin_scale > 0):
-            raise ConfigError("l1 path margins must be positive")
+        if not (self.margin_fraction >= 0 and self.margin_deg >= 0 and self.margin_scale >= 0):
+            raise ConfigError("l1 path margins must be >= 0 (0: that parameter follows the input)")
         if self.window < 8 or not 4 <= self.overlap < self.window // 2:
             raise ConfigError(f"l1 path window {self.window} / overlap {self.overlap}: need window >= 8 and "
                              f"4 <= overlap < window / 2")
@@ -69,6 +69,8 @@ def plan(original: np.ndarray, margin: float | np.ndarray, weights: tuple[float,
     original = np.asarray(original, np.float64)
     n = len(original)
     margin = np.broadcast_to(np.asarray(margin, np.float64), (n,))
+    if not np.any(margin > 0):
+        return original.copy()  # nowhere to go: the path is the input's
     if n <= window:
         return _solve(original, original - margin, original + margin, weights)
     path = np.empty(n)

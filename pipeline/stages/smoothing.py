@@ -11,6 +11,7 @@ Windows are truncated at the ends of the video and at scene cuts, and the weight
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Sequence
@@ -18,7 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from pipeline import geometry
-from pipeline.stages import l1_path
+from pipeline.stages import l1_path, path_control
 from pipeline.errors import ConfigError
 
 DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
@@ -35,6 +36,11 @@ class SmoothingConfig:
     path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/stages/l1_path.py); "tripod": held
     l1: l1_path.L1PathConfig = l1_path.L1PathConfig()  # its bounds, when path is "l1"
     horizon_lock: bool = False  # the output keeps the rotation of each shot's first frame (any path)
+    # Per-axis strength 0-100 (path_control.Smoothness); None: radius/sigma (eq. 18) or l1's margins as given.
+    smoothness: path_control.Smoothness | None = None
+    max_shift: float | None = None  # px: no output frame's centre departs further from its input's (x, y each)
+    max_angle: float | None = None  # degrees: nor turns further
+    segments: tuple[path_control.PathSegment, ...] = ()  # time ranges with their own path and smoothness
 
     def __post_init__(self) -> None:
         if self.path not in PATHS:
@@ -43,10 +49,47 @@ class SmoothingConfig:
             raise ConfigError(f"smoothing radius must be >= 0, not {self.radius}")
         if self.sigma is not None and self.sigma <= 0:
             raise ConfigError(f"smoothing sigma must be > 0, not {self.sigma}")
+        if self.path == "tripod" and self.smoothness is not None:
+            raise ConfigError("the tripod path holds the camera still: smoothness does not apply to it")
+        for name in ("max_shift", "max_angle"):
+            value = getattr(self, name)
+            if value is not None and not value >= 0:
+                raise ConfigError(f"{name.replace('_', ' ')} must be >= 0, not {value}")
+        for segment in self.segments:
+            if segment.path not in PATHS:
+                raise ConfigError(f"path segment {segment.label()}: the path must be one of {', '.join(PATHS)}")
+        path_control.check_segments(self.segments)
 
     @property
     def effective_sigma(self) -> float:
         return self.sigma if self.sigma is not None else max(math.sqrt(self.radius), 1e-6)
+
+    def for_segment(self, segment: path_control.PathSegment) -> SmoothingConfig:
+        """The setting a segment plans its frames with: its path and smoothness, this config's other values."""
+        smoothness = segment.smoothness
+        if smoothness is None and segment.path != "tripod" and segment.path == self.path:
+            smoothness = self.smoothness
+        return dataclasses.replace(self, path=segment.path, smoothness=smoothness, segments=())
+
+    def l1_planner(self, width: int, height: int) -> l1_path.L1PathConfig:
+        """The L1 program's config for this path: tripod's, or l1's margins scaled by the smoothness and cut to
+        the departure bound (so the program is optimal within it, rather than clipped after)."""
+        config = l1_path.L1PathConfig.tripod() if self.path == "tripod" else self.l1
+        fraction, degrees, scale = config.margin_fraction, config.margin_deg, config.margin_scale
+        if self.smoothness is not None:
+            fraction *= self.smoothness.margin_factor("translation")
+            degrees *= self.smoothness.margin_factor("rotation")
+            scale *= self.smoothness.margin_factor("zoom")
+        if self.max_shift is not None:
+            fraction = min(fraction, self.max_shift / max(width, height, 1))
+        if self.max_angle is not None:
+            degrees = min(degrees, self.max_angle)
+        return dataclasses.replace(config, margin_fraction=fraction, margin_deg=degrees, margin_scale=scale)
+
+    def label(self) -> str:
+        """The setting in the command line's words (for warnings, recordings and figures)."""
+        text = self.path + (f":{self.smoothness.label()}" if self.smoothness is not None else "")
+        return text if self.path != "gaussian" or self.smoothness is not None else f"gaussian:k={self.radius}"
 
 
 @dataclass(frozen=True)
@@ -83,38 +126,103 @@ def neighbour_transforms(curr_from_prev: np.ndarray, t: int, first: int, last: i
 
 
 def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig(), *,
-           cuts: Sequence[int] = (), width: int = 0, height: int = 0) -> SmoothingResult:
+           cuts: Sequence[int] = (), width: int = 0, height: int = 0,
+           times_s: Sequence[float] | None = None) -> SmoothingResult:
     """S_t for every frame from the inter-frame transforms ``curr_from_prev`` ((N, 3, 3), [0] unused).
 
     ``cuts`` are frame indices that start a new shot: no window reaches across them.
-    ``width``/``height`` only serve the trajectories' reference point (the frame centre).
+    ``width``/``height`` serve the trajectories' reference point (the frame centre) and the L1 path's margins.
+    ``times_s``: each frame's time, needed only for ``config.segments`` (which are in seconds).
     """
     curr_from_prev = np.asarray(curr_from_prev, dtype=np.float64)
     n_frames = len(curr_from_prev)
     segment_starts = tuple(sorted({0, *(c for c in cuts if 0 < c < n_frames)}))
-    segment_of = np.searchsorted(segment_starts, np.arange(n_frames), side="right") - 1
     segment_end = [*(s - 1 for s in segment_starts[1:]), n_frames - 1]
-
-    if config.path != "gaussian":
-        planner = l1_path.L1PathConfig.tripod() if config.path == "tripod" else config.l1
-        orig_from_stab = _l1_paths(curr_from_prev, segment_starts, segment_end, planner, width, height)
-        return _finish(curr_from_prev, orig_from_stab, segment_starts, config, width, height)
-
-    radius = config.radius
-    kernel = gaussian_weights(radius, config.effective_sigma)
+    settings = [config]
+    setting_of = np.zeros(n_frames, dtype=np.int64)
+    if config.segments:
+        if times_s is None or len(times_s) != n_frames:
+            raise ConfigError("path segments are in seconds: smooth() needs each frame's time (times_s)")
+        settings += [config.for_segment(segment) for segment in config.segments]
+        setting_of = path_control.setting_of_frames(config.segments, np.asarray(times_s, np.float64))
+    blend = path_control.blend_frames(np.asarray(times_s, np.float64)) if times_s is not None else 30
     prev_from_curr = np.linalg.inv(curr_from_prev)
     orig_from_stab = np.empty((n_frames, 3, 3))
-    for t in range(n_frames):
-        seg = segment_of[t]
-        first = max(t - radius, segment_starts[seg])
-        last = min(t + radius, segment_end[seg])
-        t_from = neighbour_transforms(curr_from_prev, t, first, last, prev_from_curr)
-        weights = kernel[first - t + radius: last - t + radius + 1]
-        weights = weights / weights.sum()
-        s_t = sum(w * t_from[i] for w, i in zip(weights, range(first, last + 1)))
-        orig_from_stab[t] = s_t / s_t[2, 2]
-
+    for first, last in zip(segment_starts, segment_end):
+        orig_from_stab[first:last + 1] = _plan_shot(curr_from_prev, prev_from_curr, first, last, settings,
+                                                    setting_of, blend, width, height)
     return _finish(curr_from_prev, orig_from_stab, segment_starts, config, width, height)
+
+
+def _plan_shot(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: int, last: int,
+               settings: Sequence[SmoothingConfig], setting_of: np.ndarray, blend: int, width: int, height: int
+               ) -> np.ndarray:
+    """S_t of one shot: each run of frames with one setting planned alone, over its frames and one more on each
+    side (within the shot); from a switch on, the new run's S_t times an offset that starts at the old run's
+    S_t there (no jump) and eases to the identity over ``blend`` frames."""
+    runs = [first, *(t for t in range(first + 1, last + 1) if setting_of[t] != setting_of[t - 1]), last + 1]
+    out = np.empty((last - first + 1, 3, 3))
+    carried: np.ndarray | None = None  # the previous run's final S_t at this run's first frame
+    for a, b in zip(runs, runs[1:]):
+        lo, hi = max(a - 1, first), min(b, last)  # one frame beyond each end: where the runs meet
+        planned = _plan_range(curr_from_prev, prev_from_curr, lo, hi, settings[setting_of[a]], width, height)
+        s = planned[a - lo:]  # frames a .. hi
+        if carried is not None:
+            start_offset = np.linalg.solve(s[0], carried)  # S_new(a) @ offset = S_old(a)
+            weights = path_control.ease_out(np.arange(len(s)), blend)
+            s = np.array([m @ path_control.eased(start_offset, w) for m, w in zip(s, weights)])
+            s /= s[:, 2:3, 2:3]
+        out[a - first:b - first] = s[:b - a]
+        carried = s[b - a] if hi == b else None
+    return out
+
+
+def _plan_range(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: int, last: int,
+                config: SmoothingConfig, width: int, height: int) -> np.ndarray:
+    """S_t for frames ``first``..``last`` planned as one shot with one setting."""
+    if config.path != "gaussian":
+        planner = config.l1_planner(max(width, 1), max(height, 1))
+        return _l1_path(curr_from_prev, first, last, planner, width, height)
+    if config.smoothness is None or config.smoothness.uniform:
+        radius = config.radius if config.smoothness is None else config.smoothness.radius("translation")
+        sigma = config.effective_sigma if config.smoothness is None else max(math.sqrt(radius), 1e-6)
+        return _gaussian(curr_from_prev, prev_from_curr, first, last, radius, sigma)
+    # Per axis: eq. 18 at each axis's radius; the translation run's S_t turned and zoomed about the output centre
+    # (which it sends to the same place) to the rotation and zoom runs' angle and scale.
+    by_axis = {}
+    for axis in path_control.AXES:
+        radius = config.smoothness.radius(axis)
+        if radius not in by_axis:
+            by_axis[radius] = _gaussian(curr_from_prev, prev_from_curr, first, last, radius,
+                                        max(math.sqrt(radius), 1e-6))
+    moved = by_axis[config.smoothness.radius("translation")]
+    turned = by_axis[config.smoothness.radius("rotation")]
+    zoomed = by_axis[config.smoothness.radius("zoom")]
+    out = np.empty_like(moved)
+    for i in range(len(moved)):
+        _, _, angle, scale = geometry.decompose(moved[i], width, height)
+        _, _, want_angle, _ = geometry.decompose(turned[i], width, height)
+        _, _, _, want_scale = geometry.decompose(zoomed[i], width, height)
+        change = l1_path.similarity((0.0, 0.0, math.radians(want_angle - angle), math.log(want_scale / scale)),
+                                    max(width, 1), max(height, 1))
+        m = moved[i] @ change
+        out[i] = m / m[2, 2]
+    return out
+
+
+def _gaussian(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: int, last: int, radius: int,
+              sigma: float) -> np.ndarray:
+    """Eq. 18 for frames ``first``..``last`` of one shot: windows truncated at its ends, weights re-normalised."""
+    kernel = gaussian_weights(radius, sigma)
+    out = np.empty((last - first + 1, 3, 3))
+    for t in range(first, last + 1):
+        lo, hi = max(t - radius, first), min(t + radius, last)
+        t_from = neighbour_transforms(curr_from_prev, t, lo, hi, prev_from_curr)
+        weights = kernel[lo - t + radius: hi - t + radius + 1]
+        weights = weights / weights.sum()
+        s_t = sum(w * t_from[i] for w, i in zip(weights, range(lo, hi + 1)))
+        out[t - first] = s_t / s_t[2, 2]
+    return out
 
 
 def path_warnings(result: SmoothingResult, config: SmoothingConfig) -> list[str]:
@@ -148,21 +256,22 @@ def _finish(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_star
                                                              width, height)
             orig_from_stab[t] = turned / turned[2, 2]
         original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
+    if config.max_shift is not None or config.max_angle is not None:
+        orig_from_stab = path_control.bound_departure(orig_from_stab, width, height, config.max_shift,
+                                                      config.max_angle)
+        original, smoothed = trajectories(curr_from_prev, orig_from_stab, segment_starts, width, height)
     return SmoothingResult(orig_from_stab, segment_starts, original, smoothed)
 
 
-def _l1_paths(curr_from_prev: np.ndarray, segment_starts: Sequence[int], segment_end: Sequence[int],
-              config: l1_path.L1PathConfig, width: int, height: int) -> np.ndarray:
-    """S_t of the L1-optimal path, shot by shot (each from its own accumulated path)."""
-    orig_from_stab = np.empty((len(curr_from_prev), 3, 3))
-    for first, last in zip(segment_starts, segment_end):
-        first_from_t = np.empty((last - first + 1, 3, 3))
-        first_from_t[0] = geometry.IDENTITY
-        for t in range(first + 1, last + 1):
-            m = first_from_t[t - first - 1] @ np.linalg.inv(curr_from_prev[t])
-            first_from_t[t - first] = m / m[2, 2]
-        orig_from_stab[first:last + 1] = l1_path.orig_from_stab(first_from_t, config, max(width, 1), max(height, 1))
-    return orig_from_stab
+def _l1_path(curr_from_prev: np.ndarray, first: int, last: int, config: l1_path.L1PathConfig, width: int,
+             height: int) -> np.ndarray:
+    """S_t of the L1-optimal path for frames ``first``..``last`` of one shot (from its own accumulated path)."""
+    first_from_t = np.empty((last - first + 1, 3, 3))
+    first_from_t[0] = geometry.IDENTITY
+    for t in range(first + 1, last + 1):
+        m = first_from_t[t - first - 1] @ np.linalg.inv(curr_from_prev[t])
+        first_from_t[t - first] = m / m[2, 2]
+    return l1_path.orig_from_stab(first_from_t, config, max(width, 1), max(height, 1))
 
 
 def trajectories(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_starts: Sequence[int],

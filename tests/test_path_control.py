@@ -1,0 +1,185 @@
+"""Path control (issue 25) on synthetic ground truth: smoothness strengths per axis, the departure bound, path
+segments switching at the right frame without a jump, and the adaptive crop against the fixed one."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline import geometry
+from pipeline.errors import ConfigError
+from pipeline.evaluation.synthetic import SyntheticConfig, generate
+from pipeline.stages import adaptive_crop, path_control, smoothing, warping
+
+W, H = 640, 360
+STRENGTHS = (0, 25, 50, 75, 100)
+
+
+@pytest.fixture(scope="module")
+def clip():
+    return generate(SyntheticConfig(n_frames=90, moving_object=False, blurred_frames=(), seed=11,
+                                    jitter_scale=0.02))
+
+
+def output_in_world(video, orig_from_stab, first: int = 0) -> np.ndarray:
+    """(N, 4): where each output frame's centre lies in the world (x, y), its roll (rad) and log zoom; the
+    transforms are those of frames ``first``, ``first + 1``, ..."""
+    rows = []
+    for i, s_t in enumerate(orig_from_stab):
+        world_from_stab = np.linalg.inv(video.frame_from_world[first + i]) @ s_t
+        x, y, angle, scale = geometry.decompose(world_from_stab, W, H)
+        rows.append((x, y, math.radians(angle), math.log(scale)))
+    return np.array(rows)
+
+
+def shake(video, orig_from_stab) -> np.ndarray:
+    """Roughness of the output's path in the world per axis (translation px, roll rad, log zoom): Grundmann et
+    al.'s measure, the mean of 10 |D P| + |D^2 P| + 100 |D^3 P| (x and y summed). Lower is smoother; 0 is still."""
+    path = output_in_world(video, orig_from_stab)
+    cost = sum(w * np.abs(np.diff(path, k, axis=0)).mean(axis=0) for k, w in ((1, 10.0), (2, 1.0), (3, 100.0)))
+    return np.array([cost[0] + cost[1], cost[2], cost[3]])
+
+
+@pytest.mark.parametrize("path", ["gaussian", "l1"])
+@pytest.mark.parametrize("axis", range(3))
+def test_each_smoothness_strength_gives_a_smoother_path_on_its_axis_only(clip, path, axis):
+    name = path_control.AXES[axis]
+    shakes = []
+    for strength in STRENGTHS:
+        smoothness = path_control.Smoothness(**{name: float(strength)})
+        result = smoothing.smooth(clip.curr_from_prev, smoothing.SmoothingConfig(path=path, smoothness=smoothness),
+                                  width=W, height=H)
+        shakes.append(shake(clip, result.orig_from_stab))
+    shakes = np.array(shakes)  # (strengths, axes)
+    # Strength 0 follows the input on that axis: the input's own shake.
+    assert shakes[0, axis] == pytest.approx(shake(clip, np.broadcast_to(np.eye(3), (90, 3, 3)))[axis], rel=0.05)
+    # Monotonically smoother (strictly, until the L1 path is still), and by far in the end.
+    roughness = shakes[:, axis]
+    assert np.all((np.diff(roughness) < 0) | (roughness[1:] < 1e-9)), roughness
+    assert roughness[-1] < 0.02 * roughness[0]
+    # The other axes stay where the default strength puts them.
+    others = [a for a in range(3) if a != axis]
+    np.testing.assert_allclose(shakes[:, others], np.broadcast_to(shakes[2, others], (5, 2)), rtol=0.1, atol=1e-6)
+
+
+def test_smoothness_50_is_the_default_path(clip):
+    default = smoothing.smooth(clip.curr_from_prev, smoothing.SmoothingConfig(), width=W, height=H)
+    fifty = smoothing.smooth(clip.curr_from_prev, smoothing.SmoothingConfig(smoothness=path_control.Smoothness()),
+                             width=W, height=H)
+    np.testing.assert_allclose(fifty.orig_from_stab, default.orig_from_stab, atol=1e-9)
+
+
+def test_smoothness_and_segments_parse_and_refuse_in_one_line():
+    assert path_control.Smoothness.parse("70") == path_control.Smoothness(70, 70, 70)
+    assert path_control.Smoothness.parse("t=70,r=90") == path_control.Smoothness(70, 90, 50)
+    segment = path_control.PathSegment.parse("5-:gaussian:t=80,z=20")
+    assert (segment.start_s, segment.end_s, segment.path) == (5.0, None, "gaussian")
+    assert segment.smoothness == path_control.Smoothness(80, 50, 20)
+    assert path_control.PathSegment.parse("-2.5:tripod") == path_control.PathSegment(0.0, 2.5, "tripod")
+    for bad in ("101", "x=3", "t=", "abc"):
+        with pytest.raises(ConfigError):
+            path_control.Smoothness.parse(bad)
+    for bad in ("5:tripod", "0-5", "5-2:l1", "0-5:tripod:80"):
+        with pytest.raises(ConfigError):
+            path_control.PathSegment.parse(bad)
+    with pytest.raises(ConfigError, match="overlap"):
+        smoothing.SmoothingConfig(segments=(path_control.PathSegment.parse("0-5:tripod"),
+                                            path_control.PathSegment.parse("4-:l1")))
+    with pytest.raises(ConfigError, match="must be one of"):
+        smoothing.SmoothingConfig(segments=(path_control.PathSegment.parse("0-5:dolly"),))
+
+
+@pytest.mark.parametrize("path", ["gaussian", "l1", "tripod"])
+def test_the_departure_bound_holds_on_every_path(path):
+    video = generate(SyntheticConfig(n_frames=90, moving_object=False, blurred_frames=(), seed=2, jitter_px=10,
+                                     jitter_deg=2.0))
+    free = smoothing.smooth(video.curr_from_prev, smoothing.SmoothingConfig(path=path), width=W, height=H)
+    bounded = smoothing.smooth(video.curr_from_prev,
+                               smoothing.SmoothingConfig(path=path, max_shift=4.0, max_angle=0.5), width=W, height=H)
+
+    def departures(result):
+        return np.array([geometry.decompose(s, W, H)[:3] for s in result.orig_from_stab])
+
+    # Without the bound the path goes further (the case has teeth); with it, never.
+    assert np.abs(departures(free)[:, :2]).max() > 6.0 and np.abs(departures(free)[:, 2]).max() > 0.8
+    within = np.abs(departures(bounded))
+    assert within[:, :2].max() <= 4.0 + 1e-6 and within[:, 2].max() <= 0.5 + 1e-6
+    # And it still stabilizes, within the bound: steadier than the input.
+    identity = np.broadcast_to(np.eye(3), (90, 3, 3))
+    assert shake(video, bounded.orig_from_stab)[0] < 0.9 * shake(video, identity)[0]
+
+
+def test_segments_switch_at_the_right_frame_without_a_jump():
+    """Tripod for the first 2 s, eq. 18 after: held through the switch frame, then exactly each setting's own plan
+    (the tripod's before, eq. 18's once the ease is over), and no step at the switch larger than the path's
+    steps elsewhere; a hard switch would jump."""
+    video = generate(SyntheticConfig(n_frames=150, moving_object=False, blurred_frames=(), seed=3,
+                                     pan_px_per_frame=0.6))
+    times = np.arange(150) / 30.0
+    config = smoothing.SmoothingConfig(segments=(path_control.PathSegment.parse("0-2:tripod"),))
+    result = smoothing.smooth(video.curr_from_prev, config, width=W, height=H, times_s=times)
+    switch, blend = 60, path_control.blend_frames(times)
+    tripod = smoothing.smooth(video.curr_from_prev[:switch + 1], smoothing.SmoothingConfig(path="tripod"),
+                              width=W, height=H)
+    after = video.curr_from_prev[switch - 1:].copy()
+    after[0] = np.eye(3)
+    gaussian = smoothing.smooth(after, smoothing.SmoothingConfig(), width=W, height=H)
+    np.testing.assert_allclose(result.orig_from_stab[:switch + 1], tripod.orig_from_stab, atol=1e-9)
+    np.testing.assert_allclose(result.orig_from_stab[switch + blend:], gaussian.orig_from_stab[1 + blend:],
+                               atol=1e-9)
+    centre = output_in_world(video, result.orig_from_stab)[:, :2]
+    steps = np.linalg.norm(np.diff(centre, axis=0), axis=1)
+    assert steps[:switch].max() < 0.3  # held still up to the switch frame
+    assert steps[switch:switch + blend + 10].mean() > 0.3  # and panning after it
+    later = output_in_world(video, gaussian.orig_from_stab, switch - 1)[:, :2]
+    assert steps[switch - 3:switch + 3].max() <= np.linalg.norm(np.diff(later, axis=0), axis=1).max() + 0.1
+    # A hard switch (each setting's own S_t at the switch frame) would jump by this much.
+    hard = np.linalg.norm(centre[switch] - later[1])
+    assert hard > 3 * steps[switch - 3:switch + 3].max()
+
+
+def test_segments_need_frame_times():
+    with pytest.raises(ConfigError, match="times_s"):
+        smoothing.smooth(np.broadcast_to(np.eye(3), (10, 3, 3)),
+                         smoothing.SmoothingConfig(segments=(path_control.PathSegment.parse("0-1:l1"),)))
+
+
+def corner_jitter(video, orig_from_out) -> float:
+    """Residual jitter of the output's four corners, in output px (zoom changes count as motion): the accumulated
+    inter-frame motion of the output minus its Gaussian low-pass (sigma 0.5 s), RMS (docs/metrics.md's residual
+    jitter, at the corners)."""
+    from scipy.ndimage import gaussian_filter1d
+
+    corners = geometry.frame_corners(W, H)
+    steps = [np.zeros((4, 2))]
+    for t in range(1, video.n_frames):
+        out_from_prev_out = (np.linalg.inv(orig_from_out[t]) @ video.frame_from_world[t]
+                             @ np.linalg.inv(video.frame_from_world[t - 1]) @ orig_from_out[t - 1])
+        steps.append(geometry.apply(out_from_prev_out, corners) - corners)
+    track = np.cumsum(steps, axis=0)
+    residual = track - gaussian_filter1d(track, 15, axis=0, mode="nearest")
+    return float(np.sqrt((residual**2).sum(axis=-1).mean()))
+
+
+def test_adaptive_crop_keeps_more_than_the_fixed_crop_at_no_more_jitter_and_no_black_pixel():
+    video = generate(SyntheticConfig(n_frames=240, moving_object=False, blurred_frames=(), seed=6, jitter_px=8,
+                                     jitter_envelope=(0.1, 1.0)))  # calm first half, shaky second
+    path = smoothing.smooth(video.curr_from_prev, smoothing.SmoothingConfig(), width=W, height=H)
+    fixed = warping.largest_crop(path.orig_from_stab, W, H)
+    adaptive = adaptive_crop.adaptive_crop(path.orig_from_stab, W, H)
+    fixed_out = path.orig_from_stab @ fixed.stab_from_out
+    adaptive_out = path.orig_from_stab @ adaptive.stab_from_out
+    assert adaptive.cropping_ratio > fixed.cropping_ratio + 0.03
+    # The zoom follows the shake: wider in the calm half than in the shaky one, changing at the bounded rate.
+    assert adaptive.scales[:90].mean() > adaptive.scales[150:].mean() + 0.03
+    assert np.abs(np.diff(adaptive.scales)).max() <= adaptive_crop.DEFAULT_ZOOM_SPEED / 100 + 1e-12
+    assert corner_jitter(video, adaptive_out) <= corner_jitter(video, fixed_out)
+    for t in range(video.n_frames):
+        assert not warping.warp_frame(video.frames[t], adaptive_out[t]).missing.any(), t
+    # The window has teeth: each frame's largest window, unsmoothed, would be larger somewhere and then black
+    # nowhere either, but a window 2 % larger than the chosen one shows black on some frame.
+    grown = adaptive_crop.AdaptiveCrop(np.minimum(adaptive.scales * 1.02, 1.0), adaptive.anchor, W, H)
+    grown_out = path.orig_from_stab @ grown.stab_from_out
+    assert any(warping.warp_frame(video.frames[t], grown_out[t]).missing.any() for t in range(video.n_frames))
