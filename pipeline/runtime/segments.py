@@ -22,7 +22,7 @@ import numpy as np
 
 from pipeline import stabilize as stab
 from pipeline.chain import render_frames
-from pipeline.errors import InputError
+from pipeline.errors import ConfigError, InputError
 from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
 from pipeline.runtime import video_io
 from pipeline.runtime.observer import NullObserver, Observer, null_progress
@@ -40,7 +40,7 @@ def serial_map(fn: Callable[..., Any], jobs: Sequence[tuple]) -> Iterator[Any]:
 def plan(n_frames: int, segment_frames: int) -> list[range]:
     """Consecutive ranges of ``segment_frames`` frames covering 0..n_frames (the last one open-ended)."""
     if segment_frames < 1:
-        raise ValueError(f"segment length must be at least 1 frame, not {segment_frames}")
+        raise ConfigError(f"segment length must be at least 1 frame, not {segment_frames}")
     starts = list(range(0, max(n_frames, 1), segment_frames))
     return [range(a, b) for a, b in zip(starts, starts[1:] + [OPEN_END])]
 
