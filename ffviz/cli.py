@@ -240,9 +240,14 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                             % (rrd_default if rrd_default is not None else "no recording"))
     if not rrd_folder:
         p.add_argument("--view", action="store_true",
-                       help="watch the run live in Rerun's web viewer on 127.0.0.1:9090 (the URL is printed) while "
+                       help="watch the run live in Rerun's web viewer on 127.0.0.1 (the URL is printed) while "
                             "it also writes the recording (--rrd, default recordings/<input name>.rrd); keeps "
                             "serving after the run until Ctrl-C (default: off)")
+        p.add_argument("--web-port", type=int, default=9090, metavar="PORT",
+                       help="with --view: TCP port of the web viewer page on 127.0.0.1 (default: %(default)s)")
+        p.add_argument("--grpc-port", type=int, default=9876, metavar="PORT",
+                       help="with --view: TCP port on 127.0.0.1 the run streams to and the page reads from "
+                            "(default: %(default)s)")
     p.add_argument("--record", choices=("summary", "full"), default="full",
                    help="recording detail: summary (series and output frames) or full (every intermediate) "
                         "(default: %(default)s)")

@@ -137,7 +137,7 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
         from ffviz.viewer import LiveViewer
 
         rrd_path = rrd_path or DEFAULT_RECORDINGS / f"{input_path.stem}.rrd"
-        live = LiveViewer()
+        live = LiveViewer(web_port=args.web_port, grpc_port=args.grpc_port)
         print(f"live view: {live.url}", flush=True)
     recorder = None
     if rrd_path is not None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import socket
 import subprocess
 import sys
@@ -151,6 +152,50 @@ def test_view_serves_the_web_viewer_on_localhost(shaky, tmp_path):
     finally:
         process.terminate()
         process.wait(timeout=20)
+
+
+def _page_served(port: int, timeout_s: float = 30.0) -> bool:
+    deadline = time.time() + timeout_s
+    while True:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2) as response:
+                return response.status == 200 and b"<html" in response.read().lower()
+        except OSError:
+            if time.time() > deadline:
+                return False
+            time.sleep(0.5)
+
+
+def test_stabilize_view_streams_live_and_also_saves_the_recording(shaky, tmp_path):
+    """`ffviz stabilize --view`: the web viewer serves while the run goes and after it, the .rrd and the video are
+    written whole, and Ctrl-C ends it cleanly (exit 0, the viewer's ports closed)."""
+    path, video = shaky
+    web, grpc = free_port(), free_port()
+    rrd, out = tmp_path / "live.rrd", tmp_path / "live.mp4"
+    process = subprocess.Popen([sys.executable, "-m", "ffviz.cli", "stabilize", str(path), "-o", str(out),
+                                "--mode", "none", "--view", "--rrd", str(rrd), "--record", "summary",
+                                "--web-port", str(web), "--grpc-port", str(grpc)],
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert f"http://127.0.0.1:{web}/" in process.stdout.readline()
+        assert _page_served(web)
+        lines = []
+        for line in process.stdout:  # the run ends; the viewer keeps serving
+            lines.append(line)
+            if "still serving" in line:
+                break
+        assert any("still serving" in line for line in lines), lines
+        assert _page_served(web, timeout_s=5)
+        assert video_io.count_frames(out) == len(video.frames)
+        recording = Recording.load(rrd)
+        assert recording.indices(ent.OUTPUT_FRAME) == list(range(len(video.frames)))
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=30)
+    assert process.returncode == 0
+    for port in (web, grpc):
+        with socket.socket() as probe:
+            assert probe.connect_ex(("127.0.0.1", port)) != 0, f"port {port} still open after Ctrl-C"
 
 
 def test_view_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
