@@ -46,6 +46,7 @@ FILLED_BY_BASE = 100  # filled_by class of a local-warp pixel: FILLED_BY_BASE + 
 # that each frame's packet comes out with it (live view, no reordering), a keyframe a second for seeking.
 H264_OPTIONS = {"preset": "veryfast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
 KEYFRAME_INTERVAL = 30
+FRAME_SIZE_FIELD = "frame_size"  # (width, height) of a frame stream whose size is odd (ffviz.rrd crops to it)
 WEIGHTS_STEP = 4  # deblur/weights in the compact recording: multiples of 4/255 (--lossless: of 1/255)
 QUEUE_EVENTS = 48  # stage results waiting for the recorder's thread (~6 frames' worth): bounds the memory held
 _STOP = object()
@@ -225,6 +226,9 @@ class VideoTrack:
         codec.options = dict(H264_OPTIONS, g=str(KEYFRAME_INTERVAL))
         self._codec = codec
         self.rec.log(self.entity, rr.VideoStream(codec=rr.VideoCodec.H264), static=True)
+        if width % 2 or height % 2:  # the frames' true size, for reading back (4:2:0 pads odd sizes by a row/column)
+            self.rec.log(self.entity, rr.AnyValues(**{FRAME_SIZE_FIELD: np.array([width, height], np.int32)}),
+                         static=True)
 
     def add(self, stamp: Stamp, rgb: np.ndarray) -> None:
         height, width = rgb.shape[:2]

@@ -205,8 +205,21 @@ class Recording:
             decoded += [f.to_ndarray(format="rgb24") for f in decoder.decode(None)]
             if len(decoded) != len(samples):
                 raise ValueError(f"{entity}: {len(samples)} samples decoded to {len(decoded)} frames")
+            size = self._frame_size(entity)
+            if size is not None:  # odd sizes were padded by a row / column for 4:2:0
+                decoded = [image[:size[1], :size[0]] for image in decoded]
             self._videos[entity] = {frame: image for (frame, _, _), image in zip(samples, decoded)}
         return self._videos[entity]
+
+    def _frame_size(self, entity: str) -> tuple[int, int] | None:
+        """(width, height) the recorder noted for a frame stream of odd size; None when it noted none."""
+        for batch in self.batches.get(entity, []):
+            if "frame_size" in batch.schema.names:
+                values = [v for v in batch.column("frame_size").to_pylist() if v]
+                if values:
+                    width, height = values[-1]
+                    return int(width), int(height)
+        return None
 
     def labels(self, entity: str, timeline: str = ent.FRAME_TIMELINE) -> dict[int, str]:
         """{time: first label} of a Boxes2D/Points2D entity on ``timeline``."""

@@ -9,6 +9,7 @@ import typing
 import subprocess
 from types import SimpleNamespace
 
+import av
 import numpy as np
 import pytest
 import rerun as rr
@@ -24,7 +25,7 @@ from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURC
 from pipeline.stages.neighbours import WarpedNeighbour
 from pipeline.results import FrameResult, Stamp
 from pipeline.runtime.observer import Observers, StageCollector
-from pipeline.stages.deblur import DeblurResult
+from pipeline.stages.deblur import DeblurConfig, DeblurResult
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 N_FRAMES = 30
@@ -372,6 +373,31 @@ def test_frame_streams_are_h264_video_that_decodes_to_every_frame(compact_run):
         errors = [np.mean(np.abs(frames[t].astype(float) - truth[t])) for t in range(N_FRAMES)]
         assert max(errors) < 6.0, (entity, max(errors))  # H.264 at crf 20: close, not exact
         assert recording.indices(entity) == list(range(N_FRAMES))
+
+
+def test_odd_sized_frames_read_back_at_their_own_size(tmp_path):
+    """4:2:0 H.264 needs even sizes, so a 161x97 clip is recorded padded by a row and a column; reading back
+    crops to the frame's own size."""
+    video = synthetic.generate(synthetic.SyntheticConfig(width=161, height=97, n_frames=6, seed=2))
+    clip = tmp_path / "odd.mkv"
+    with av.open(str(clip), "w") as container:  # FFV1 4:4:4 keeps the odd size (x264's 4:2:0 would not)
+        stream = container.add_stream("ffv1", rate=30)
+        stream.width, stream.height, stream.pix_fmt = 161, 97, "yuv444p"
+        for rgb in video.frames:
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(rgb, format="rgb24").reformat(format="yuv444p")))
+        container.mux(stream.encode(None))
+    rrd = tmp_path / "odd.rrd"
+    outputs = StageCollector("output")
+    stabilize(clip, None, StabilizeConfig(mode="none", deblur=DeblurConfig(enabled=False)),
+              observer=Observers(RerunRecorder(rrd, level="summary"), outputs))
+    frames = Recording.load(rrd).video_frames(ent.OUTPUT_FRAME)
+    assert sorted(frames) == list(range(6))
+    for stamp, truth in outputs.results["output"]:
+        back = frames[stamp.index].astype(float)
+        assert back.shape == truth.shape == (97, 161, 3)
+        aligned = np.mean(np.abs(back - truth))  # H.264 at crf 20 on a small textured frame: ~6 levels
+        shifted = np.mean(np.abs(back[1:, 1:] - truth[:-1, :-1]))  # what a crop on the wrong side would match
+        assert aligned < 8.0 and shifted > 1.3 * aligned, (aligned, shifted)
 
 
 def test_masks_are_exact_and_maps_within_half_a_step(compact_run):
