@@ -27,7 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pipeline.stages import completion, smoothing
+from pipeline import geometry
+from pipeline.stages import completion
 from pipeline.runtime.observer import NullObserver
 from pipeline.stabilize import stabilize
 
@@ -143,7 +144,7 @@ def _flicker_by_source(path: Path) -> None:
             continue
         grey, missing, source = kept.completed[t]
         prev_grey, prev_missing, prev_source = kept.completed[t - 1]
-        t_from = smoothing.neighbour_transforms(curr_from_prev, t, t - 1, t)
+        t_from = geometry.neighbour_transforms(curr_from_prev, t, t - 1, t)
         prev_from_here = np.linalg.inv(S[t - 1]) @ np.linalg.inv(t_from[t - 1]) @ S[t]
         h, w = missing.shape
 

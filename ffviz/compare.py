@@ -44,7 +44,7 @@ BACKGROUND = (22, 24, 29)  # around and between the videos
 PLOT_BACKGROUND = (34, 37, 44)
 TEXT = (225, 228, 235)
 GAP_PX = 4  # between two videos
-ENCODING = video_io.Encoding(preset="veryfast")  # a viewing aid: x264 at CRF 18, at a third of medium's CPU
+ENCODING = video_io.Encoding(codec="h264", preset="veryfast")  # a viewing aid: x264, CRF 18, a third of medium's CPU
 
 
 @dataclass(frozen=True)
@@ -355,7 +355,9 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
 
     leeway = 0.5 / fps
     # A clip: the output starts at the input's first frame, and the audio ends with the last frame written.
-    like = dataclasses.replace(lead.info, clip=lead.info.clip or (0.0, end_s))
+    # 8 bits (the frames are read as uint8; 8-bit H.264 plays everywhere), the input's matrix, range and tags.
+    like = dataclasses.replace(lead.info, clip=lead.info.clip or (0.0, end_s),
+                               colour=dataclasses.replace(lead.info.colour, bit_depth=8))
     audio_from = panels[0].path if lead.info.has_audio else None
     bar = progress("compare 2/2: side by side + encode", len(lead.times))
     readers: list[video_io.VideoReader] = []

@@ -68,6 +68,19 @@ def rescale_transform(work_transform: np.ndarray, scale: float) -> np.ndarray:
     return to_3x3(np.linalg.inv(work_from_full) @ work_transform @ work_from_full)
 
 
+def neighbour_transforms(curr_from_prev: np.ndarray, t: int, first: int, last: int,
+                         prev_from_curr: np.ndarray | None = None) -> dict[int, np.ndarray]:
+    """t_from_i for every i in [first, last]: chains of inter-frame transforms outward from t."""
+    if prev_from_curr is None:
+        prev_from_curr = np.linalg.inv(curr_from_prev)
+    t_from = {t: geometry.IDENTITY.copy()}
+    for i in range(t - 1, first - 1, -1):  # t_from_i = t_from_(i+1) @ (i+1)_from_i
+        t_from[i] = t_from[i + 1] @ curr_from_prev[i + 1]
+    for i in range(t + 1, last + 1):  # t_from_i = t_from_(i-1) @ (i-1)_from_i
+        t_from[i] = t_from[i - 1] @ prev_from_curr[i]
+    return {i: m / m[2, 2] for i, m in t_from.items()}
+
+
 def decompose(transform: np.ndarray, width: int, height: int) -> tuple[float, float, float, float]:
     """Displacement of the frame centre (dx, dy in px), rotation (degrees) and mean scale of a transform.
 

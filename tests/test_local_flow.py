@@ -9,7 +9,7 @@ import pytest
 from pipeline.stages import completion
 from pipeline.evaluation import synthetic
 from pipeline.stages.local_flow import LocalFlowConfig, fill_invalid, local_flow, mean_abs_difference
-from pipeline.stages.mosaic import intensity
+from pipeline.imaging import intensity
 from pipeline.stages.neighbours import WarpedNeighbour
 from pipeline.stages.warping import warp, warp_frame
 

@@ -15,7 +15,8 @@ import pytest
 from scipy import ndimage
 from skimage import data
 
-from pipeline.stages import completion, mosaic, smoothing, warping
+from pipeline import geometry, imaging
+from pipeline.stages import completion, warping
 from pipeline.stages.neighbours import Downscaled, WarpedNeighbour, shrink, shrink_all, warp_neighbours
 
 H, W = 240, 320
@@ -263,7 +264,7 @@ def test_warp_neighbours_nearest_first_with_their_transforms(photo):
     frames = {i: np.ascontiguousarray(np.roll(photo, 7 * i, axis=1)) for i in (2, 3, 4, 6, 7, 9)}
     warped = warp_neighbours(frames, t, curr_from_prev, orig_from_stab_t)
     assert [w.offset for w in warped] == [-1, 1, -2, 2, -3, 4]  # nearest first, the earlier of a tie first
-    t_from = smoothing.neighbour_transforms(curr_from_prev, t, 2, 9)
+    t_from = geometry.neighbour_transforms(curr_from_prev, t, 2, 9)
     for neighbour in warped:
         other = t + neighbour.offset
         assert neighbour.original is frames[other]
@@ -437,7 +438,7 @@ def _rotated(target: np.ndarray) -> np.ndarray:
 def _brute_force(target, known, neighbour, landed, ys, xs, nearest_y, nearest_x, radius):
     """Mean |I_t - I_w| over the known, landed pixels of the (2r+1)^2 window around each given nearest pixel."""
     height, width = known.shape
-    target_i, neighbour_i = mosaic.intensity(target), mosaic.intensity(neighbour)
+    target_i, neighbour_i = imaging.intensity(target), imaging.intensity(neighbour)
     errors = []
     for y, x in zip(nearest_y, nearest_x):
         rows = slice(max(y - radius, 0), min(y + radius + 1, height))

@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.stages import fallback, fmm, local_flow, mosaic
-from pipeline import geometry
+from pipeline import geometry, imaging
 from pipeline.errors import ConfigError
 from pipeline.stages.neighbours import WarpedNeighbour, shrink, shrink_all, shrink_any
 
@@ -203,12 +203,12 @@ class _LocalError:
         near = fallback.nearest_known(~known, ys, xs, mask_size=5)  # the L2 5x5 approximation
         self.point_of, self.window, band = _windows(np.ascontiguousarray(known), near, radius)
         self.band_y, self.band_x = band // width, band % width
-        self.target = mosaic.intensity(target[self.band_y, self.band_x])
+        self.target = imaging.intensity(target[self.band_y, self.band_x])
 
     def __call__(self, colours: np.ndarray, landed: np.ndarray) -> np.ndarray:
         """(m,) errors from a warped neighbour's (colours, landed) on the band; NaN where the warp reached none of
         a pixel's window."""
-        difference = np.abs(self.target - mosaic.intensity(colours))
+        difference = np.abs(self.target - imaging.intensity(colours))
         per_point = np.empty(len(self.window), np.float32)
         _window_means(difference, np.ascontiguousarray(landed, dtype=np.bool_), self.window, per_point)
         return per_point[self.point_of]
@@ -367,7 +367,7 @@ def _priority(target: np.ndarray, known: np.ndarray, neighbours: Sequence[Warped
     # the work.
     step = max(2, max(target.shape[:2]) // 320)
     grid_y, grid_x = np.mgrid[0:target.shape[0]:step, 0:target.shape[1]:step].astype(np.float32)
-    target_grid = mosaic.intensity(target[::step, ::step])
+    target_grid = imaging.intensity(target[::step, ::step])
     known_grid = known[::step, ::step]
     for _, group in itertools.groupby(_by_distance(neighbours), key=lambda i: abs(neighbours[i].offset)):
         group = list(group)
@@ -601,11 +601,11 @@ def _seen_by_another(sample: np.ndarray, source: int, at_missing: list[tuple[np.
     """Whether some other neighbour shows (as it is, no local motion) the sample's intensity at each pixel."""
     if threshold is None:
         return np.ones(len(sample), bool)
-    value = mosaic.intensity(sample)
+    value = imaging.intensity(sample)
     seen = np.zeros(len(sample), bool)
     for n, (colours, valid) in enumerate(at_missing):
         if n != source:
-            seen |= valid & (np.abs(mosaic.intensity(colours) - value) < threshold)
+            seen |= valid & (np.abs(imaging.intensity(colours) - value) < threshold)
     return seen
 
 

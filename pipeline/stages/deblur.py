@@ -34,10 +34,10 @@ import numpy as np
 
 from pipeline.stages import deblur_kernels as kernels
 from pipeline import geometry
-from pipeline.stages import smoothing, warping
+from pipeline.stages import warping
 from pipeline.errors import ConfigError
 from pipeline.stages.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
-from pipeline.stages.mosaic import INTENSITY_WEIGHTS, intensity
+from pipeline.imaging import INTENSITY_WEIGHTS, intensity
 from pipeline.runtime.window import PerFrame
 
 # Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
@@ -204,7 +204,7 @@ def window_blurriness(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: 
         raise ValueError(f"frame {t} must be among the frames compared")
     cache = EnergyCache() if cache is None else cache
     height, width = frames[t].shape[:2]
-    t_from = smoothing.neighbour_transforms(curr_from_prev, t, min(frames), max(frames))
+    t_from = geometry.neighbour_transforms(curr_from_prev, t, min(frames), max(frames))
     energy = {i: cache.get(i, rgb) for i, rgb in frames.items()}
     own = _inverse(float(np.mean(energy[t], dtype=np.float64)))
     rect = geometry.frame_corners(width, height)

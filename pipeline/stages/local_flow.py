@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.errors import ConfigError
-from pipeline.stages.mosaic import intensity
+from pipeline.imaging import intensity
 
 METHODS: tuple[str, ...] = ("dis", "farneback", "lk")
 DIS_PRESETS = {

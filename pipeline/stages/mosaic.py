@@ -29,8 +29,8 @@ import cv2
 import numpy as np
 
 from pipeline.errors import ConfigError
+from pipeline.imaging import intensity
 
-INTENSITY_WEIGHTS = np.array([0.30, 0.59, 0.11], np.float32)  # thesis 4.2.1 (after [17])
 
 
 @dataclass(frozen=True)
@@ -54,13 +54,6 @@ class MosaicResult:
     accepted: np.ndarray  # (H, W) bool: missing pixels filled here (variance < threshold)
     remaining: np.ndarray  # (H, W) bool: still missing after this stage
     coverage: np.ndarray  # (H, W) uint8: how many neighbours cover each pixel
-
-
-def intensity(rgb: np.ndarray) -> np.ndarray:
-    """0.30 R + 0.59 G + 0.11 B as float32, for (..., 3) arrays."""
-    # cv2.transform: numpy's matmul with a length-3 vector is ~20x slower on large stacks.
-    flat = np.ascontiguousarray(rgb, dtype=np.float32).reshape(-1, 1, 3)
-    return cv2.transform(flat, INTENSITY_WEIGHTS.reshape(1, 3)).reshape(rgb.shape[:-1])
 
 
 def _ranks(values: np.ndarray) -> np.ndarray:

@@ -19,7 +19,8 @@ from typing import Callable, Mapping
 import cv2
 import numpy as np
 
-from pipeline.stages import smoothing, warping
+from pipeline import geometry
+from pipeline.stages import warping
 from pipeline.runtime.window import PerFrame
 
 _MAP_COLUMNS = 4096
@@ -176,7 +177,7 @@ def warp_neighbours(frames: Mapping[int, np.ndarray], t: int, curr_from_prev: np
     if not frames:
         return []
     first, last = min(frames), max(frames)
-    t_from = smoothing.neighbour_transforms(curr_from_prev, t, min(first, t), max(last, t))
+    t_from = geometry.neighbour_transforms(curr_from_prev, t, min(first, t), max(last, t))
 
     def small_of(index: int) -> Callable[[], np.ndarray] | None:
         return None if downscaled is None else lambda: downscaled.get(index, frames[index])

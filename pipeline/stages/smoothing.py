@@ -19,6 +19,7 @@ from typing import Sequence
 import numpy as np
 
 from pipeline import geometry
+from pipeline.geometry import neighbour_transforms
 from pipeline.stages import l1_path, path_control
 from pipeline.errors import ConfigError
 
@@ -110,19 +111,6 @@ def gaussian_weights(radius: int, sigma: float) -> np.ndarray:
     """G(i) for i in [-k, k], not normalised (normalisation happens per truncated window)."""
     offsets = np.arange(-radius, radius + 1, dtype=np.float64)
     return np.exp(-(offsets**2) / (2.0 * sigma**2))
-
-
-def neighbour_transforms(curr_from_prev: np.ndarray, t: int, first: int, last: int,
-                         prev_from_curr: np.ndarray | None = None) -> dict[int, np.ndarray]:
-    """t_from_i for every i in [first, last]: chains of inter-frame transforms outward from t."""
-    if prev_from_curr is None:
-        prev_from_curr = np.linalg.inv(curr_from_prev)
-    t_from = {t: geometry.IDENTITY.copy()}
-    for i in range(t - 1, first - 1, -1):  # t_from_i = t_from_(i+1) @ (i+1)_from_i
-        t_from[i] = t_from[i + 1] @ curr_from_prev[i + 1]
-    for i in range(t + 1, last + 1):  # t_from_i = t_from_(i-1) @ (i-1)_from_i
-        t_from[i] = t_from[i - 1] @ prev_from_curr[i]
-    return {i: m / m[2, 2] for i, m in t_from.items()}
 
 
 def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig(), *,
