@@ -73,7 +73,7 @@ def neighbour_transforms(curr_from_prev: np.ndarray, t: int, first: int, last: i
     """t_from_i for every i in [first, last]: chains of inter-frame transforms outward from t."""
     if prev_from_curr is None:
         prev_from_curr = np.linalg.inv(curr_from_prev)
-    t_from = {t: geometry.IDENTITY.copy()}
+    t_from = {t: IDENTITY.copy()}
     for i in range(t - 1, first - 1, -1):  # t_from_i = t_from_(i+1) @ (i+1)_from_i
         t_from[i] = t_from[i + 1] @ curr_from_prev[i + 1]
     for i in range(t + 1, last + 1):  # t_from_i = t_from_(i-1) @ (i-1)_from_i
