@@ -220,6 +220,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--ignore-mask", metavar="IMAGE_OR_VIDEO", default=None,
                    help="image (for every frame) or video (frame by frame) of the input's size: white pixels' "
                         "features are not used by motion estimation (default: none)")
+    p.add_argument("--rolling-shutter", default=None, metavar="auto|READOUT",
+                   help="undo rolling-shutter wobble (phones, action cameras: rows exposed one after another): "
+                        "READOUT is the time the sensor takes to read a frame, as a fraction of the frame interval "
+                        "(0-1, e.g. 0.9), or auto to fit it from the video's motion (default: off)")
     p.add_argument("--refine", choices=motion.REFINEMENTS, default="none",
                    help="ecc: refine each motion estimate by hierarchical coarse-to-fine direct alignment "
                         "(slower) (default: %(default)s)")

@@ -100,11 +100,13 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "motion": Nested("MotionPass"),
         "smoothing": Nested("SmoothingResult"),
         "orig_from_out": NotRecorded("equal to the smoothed path but for the crop, both recorded"),
+        "rolling_shutter": Nested("Correction"),
         "crop": Nested("CropWindow"),
         "warnings": (ent.LOG,),
     },
     "MotionPass": {
         "curr_from_prev": NotRecorded("recorded frame by frame from on_motion"),
+        "tracks": NotRecorded("the inlier tracks, recorded frame by frame from on_motion"),
         "statuses": NotRecorded("recorded frame by frame from on_motion"),
         "times_s": (ent.VIDEO_TIME_TIMELINE,),
         "warnings": (ent.LOG,),
@@ -116,6 +118,15 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "smoothed_trajectory": _TRAJECTORY[ent.TRAJECTORY_SMOOTHED],
     },
     "CropWindow": {"x0": (ent.CROP_WINDOW,), "y0": (ent.CROP_WINDOW,), "scale": (ent.CROP_WINDOW, ent.META)},
+    "Correction": {  # --rolling-shutter
+        "readout": NotRecorded("not drawn yet"),
+        "rows": Nested("RowMotion"),
+        "curr_from_prev": NotRecorded("not drawn yet"),
+    },
+    "RowMotion": {
+        "readout": NotRecorded("not drawn yet"), "height": NotRecorded("the frame's size"),
+        "velocity": NotRecorded("not drawn yet"), "acceleration": NotRecorded("not drawn yet"),
+    },
     "FrameResult": {  # on_frame, every frame of pass 2
         "stamp": Nested("Stamp"),
         "pts": NotRecorded("the container's timestamp; the recording is timed by frame and video_time"),

@@ -72,6 +72,7 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
                 path="tripod" if getattr(args, "tripod", False) else getattr(args, "path", "gaussian"),
                 horizon_lock=getattr(args, "horizon_lock", False)),
             deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
+            rolling_shutter=getattr(args, "rolling_shutter", None),
         )
     except ValueError as error:  # the configs validate their own values
         raise ConfigError(str(error)) from None

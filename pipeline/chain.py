@@ -10,6 +10,7 @@ out identical; neighbours are taken from the frame's own shot only (nothing cros
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import threading
 import time
@@ -20,6 +21,7 @@ from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.source import FrameSource, one_pass
 from pipeline.runtime.window import Windowed, sliding_window
+from pipeline.stages import rolling_shutter
 from pipeline.stages import completion, deblur, neighbours, smoothing, warping
 
 import numpy as np
@@ -30,7 +32,19 @@ RENDER_SLACK_FRAMES = 8  # caches keep this many frames beyond the window: threa
 
 
 def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
-    """Smooth the whole path (it is tiny: one 3x3 matrix a frame) and choose each output frame's transform."""
+    """Smooth the whole path (it is tiny: one 3x3 matrix a frame) and choose each output frame's transform.
+    With rolling-shutter correction, the path is that of the corrected views (each frame's middle row's)."""
+    if config.rolling_shutter is None or motion_pass.tracks is None:
+        return _plan_views(motion_pass, config, width, height)
+    correction = rolling_shutter.estimate(motion_pass.curr_from_prev, motion_pass.tracks, config.rolling_shutter,
+                                          height, config.motion.model)
+    corrected = dataclasses.replace(motion_pass, curr_from_prev=correction.curr_from_prev)
+    plan = _plan_views(corrected, config, width, height)
+    return dataclasses.replace(plan, motion=motion_pass, rolling_shutter=correction)
+
+
+def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
+    """plan_path for frames each seen from one camera position."""
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
                                 width=width, height=height)
     warnings = [SINGLE_FRAME_WARNING] if motion_pass.n_frames == 1 else []
@@ -51,7 +65,9 @@ class FrameChain:
 
     def __init__(self, plan: PathPlan, config: StabilizeConfig, *, keep_intermediates: bool) -> None:
         self.config = config
-        self.curr_from_prev = plan.motion.curr_from_prev
+        self.rows = plan.rolling_shutter.rows if plan.rolling_shutter is not None else None
+        self.curr_from_prev = (plan.motion.curr_from_prev if plan.rolling_shutter is None
+                               else plan.rolling_shutter.curr_from_prev)
         self.orig_from_stab = plan.smoothing.orig_from_stab
         self.orig_from_out = plan.orig_from_out
         self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
@@ -90,8 +106,9 @@ class FrameChain:
 
         # Crop mode writes its own warp (by orig_from_out): the stabilized frame is made there only to be kept.
         stabilized = None
+        rows = self.rows[t] if self.rows is not None else None
         if config.mode != "crop" or self.keep:
-            stabilized = warping.warp_frame(frame.rgb, self.orig_from_stab[t])
+            stabilized = rolling_shutter.warp_frame(frame.rgb, self.orig_from_stab[t], rows)
         same_shot = {n.index: n.rgb for n in window.neighbours.values()
                      if n.index < len(self.shot_of) and self.shot_of[n.index] == self.shot_of[t]}
         warped: list[neighbours.WarpedNeighbour] = []
@@ -109,7 +126,9 @@ class FrameChain:
             lap("completion")
             output, output_valid = completed.frame, None
         elif config.mode == "crop":
-            output, output_valid = warping.warp(frame.rgb, self.orig_from_out[t]), None
+            output = (warping.warp(frame.rgb, self.orig_from_out[t]) if rows is None
+                      else rolling_shutter.warp_frame(frame.rgb, self.orig_from_out[t], rows).frame)
+            output_valid = None
             lap("warp")
         else:
             output, output_valid = stabilized.frame, ~stabilized.missing

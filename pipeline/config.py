@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from pipeline.errors import ConfigError
-from pipeline.stages import completion, deblur, motion, smoothing
+from pipeline.stages import completion, deblur, motion, rolling_shutter, smoothing
 
 OutputMode = Literal["full", "none", "crop"]
 OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
@@ -20,8 +20,10 @@ class StabilizeConfig:
     smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
     completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
     deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
+    rolling_shutter: float | str | None = None  # readout time (fraction of a frame; "0.9" is read), "auto", None: off
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "rolling_shutter", rolling_shutter.parse_readout(self.rolling_shutter))
         if self.mode not in OUTPUT_MODES:
             raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
 

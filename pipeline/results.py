@@ -16,6 +16,7 @@ import numpy as np
 from pipeline.runtime.video_io import Frame
 from pipeline.stages.completion import CompletionResult
 from pipeline.stages.deblur import DeblurResult
+from pipeline.stages.rolling_shutter import Correction, Tracks
 from pipeline.stages.smoothing import SmoothingResult
 from pipeline.stages.warping import CropWindow, WarpResult
 
@@ -37,6 +38,7 @@ class MotionPass:
     statuses: list[str]  # motion.MotionEstimate.status per frame ("ok", "cut", "fallback", ...)
     times_s: list[float]
     warnings: list[tuple[int | None, str]]
+    tracks: list[Tracks | None] | None = None  # each pair's inlier tracks, kept for rolling-shutter correction only
 
     @property
     def n_frames(self) -> int:
@@ -62,6 +64,7 @@ class PathPlan:
     orig_from_out: np.ndarray  # (N, 3, 3): output pixel -> input pixel (orig_from_stab, times the crop in crop mode)
     crop: CropWindow | None  # crop mode only; None also where no area is common to all frames
     warnings: list[str]  # about the path as a whole (limits reached, crop given up, a single frame)
+    rolling_shutter: Correction | None = None  # --rolling-shutter: each frame's rows against its middle row
 
 
 @dataclass

@@ -22,7 +22,7 @@ from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.observer import NullObserver, Observer, ProgressFactory, is_null, null_progress
 from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, one_pass
-from pipeline.stages import motion, warping
+from pipeline.stages import motion, rolling_shutter, warping
 
 __all__ = ["OUTPUT_MODES", "OutputMode", "StabilizeConfig", "MotionPass", "PathPlan", "FrameResult", "FrameChain",
            "StabilizeReport", "estimate_motion", "run_passes", "stabilize", "stabilize_source"]
@@ -48,11 +48,13 @@ class StabilizeReport:
 
 def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observer: Observer,
                     progress: ProgressFactory, total: int | None, frames: range | None = None,
-                    workers: int = 1) -> MotionPass:
+                    workers: int = 1, keep_tracks: bool = False) -> MotionPass:
     """``frames``: estimate only these (a segment); the pair (start - 1, start) is estimated here, so each
     segment reads one frame before its range and every pair gets the estimate a whole-video run gives it.
-    ``workers``: pairs estimated at once (threads); results are taken in frame order, the same either way."""
+    ``workers``: pairs estimated at once (threads); results are taken in frame order, the same either way.
+    ``keep_tracks``: keep each pair's inlier tracks (rolling-shutter correction fits them after the pass)."""
     transforms: list[np.ndarray] = []
+    tracks: list[rolling_shutter.Tracks | None] = []
     statuses: list[str] = []
     times: list[float] = []
     warnings: list[tuple[int | None, str]] = []
@@ -101,6 +103,8 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
                     observer.on_warning(stamp, estimate.warning)
                 observer.on_motion(stamp, estimate)
                 transforms.append(estimate.curr_from_prev)
+                if keep_tracks:
+                    tracks.append(rolling_shutter.inlier_tracks(estimate))
                 statuses.append(estimate.status)
                 times.append(frame.time_s)
                 bar.update()
@@ -110,7 +114,7 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
         ignore.close()
     if not transforms:
         raise InputError(f"{source.info.path}: no decodable video frames")
-    return MotionPass(np.array(transforms), statuses, times, warnings)
+    return MotionPass(np.array(transforms), statuses, times, warnings, tracks if keep_tracks else None)
 
 
 class _IgnoreMasks:
@@ -212,7 +216,8 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
 
     def motion_pass() -> MotionPass:
         return estimate_motion(source, config.motion, observer=observer, progress=progress,
-                               total=source.info.frame_count or None, workers=workers)
+                               total=source.info.frame_count or None, workers=workers,
+                               keep_tracks=config.rolling_shutter is not None)
 
     def frames(plan: PathPlan) -> Iterator[FrameResult]:
         description = "pass 2/2: warp + complete + encode" if config.completing else "pass 2/2: warp + encode"

@@ -9,7 +9,7 @@ kernel; their sharp versions are kept.
 
 Coordinate convention (whole project): ``a_from_b`` is a 3x3 homogeneous matrix mapping pixel coordinates in
 ``b`` to pixel coordinates in ``a``, acting on column vectors ``(x, y, 1)``; x right, y down, the centre of
-pixel (0, 0) is the coordinate (0, 0) (as ``cv2.warpAffine`` uses). Hence::
+pixel (0, 0) is the coordinate (0, 0) (as ``cv2.warpAffine`` uses). Hence (readout 0: a global shutter)::
 
     frame_t == cv2.warpAffine(world_with_object_at_t, frame_from_world[t][:2], (W, H), flags=cv2.INTER_CUBIC)
 
@@ -99,6 +99,9 @@ class SyntheticConfig:
     blurred_frames: tuple[int, ...] | None = None  # None -> default_blurred_frames(n_frames); () -> none
     blur_length_px: float = 12.0
     blur_angle_deg: float = 20.0  # direction (cos a, sin a) in y-down pixel coordinates (clockwise on screen)
+    # Rolling shutter: row y of frame t is exposed with the camera of time t + readout * y / height (frames; the
+    # camera between frames is the cubic spline through its per-frame parameters). 0: a global shutter.
+    readout: float = 0.0
     # World canvas.
     world_margin: float = 0.12  # extra world around every (actual and intended) view, as a fraction of W and H
     min_world_scale: float = 1.0  # the photograph is upscaled by at least this factor
@@ -108,6 +111,8 @@ class SyntheticConfig:
         if w < 8 or h < 8 or n < 1 or not fps > 0:  # "not >" also refuses NaN
             raise ConfigError(f"bad synthetic config: {w}x{h}, {n} frames at {fps} fps (needs >= 8x8, >= 1 frame, "
                               f"fps > 0)")
+        if not 0.0 <= float(self.readout) <= 1.0:
+            raise ConfigError(f"readout must be a fraction of the frame interval in 0..1, not {self.readout}")
         if self.object_kind not in ("disc", "person"):
             raise ConfigError(f"object_kind must be 'disc' or 'person', not {self.object_kind!r}")
         for i in self.blurred_frames or ():
@@ -175,6 +180,15 @@ class SyntheticVideo:
 
     def is_blurred(self, t: int) -> bool:
         return t in self.blurred
+
+    def row_frame_from_world(self, t: int, rows) -> np.ndarray:
+        """(len(rows), 3, 3): the camera that exposed each (possibly fractional) row of frame t, that of time
+        ``t + readout * row / height``; all ``frame_from_world[t]`` under a global shutter (readout 0)."""
+        rows = np.atleast_1d(np.asarray(rows, np.float64))
+        if self.config.readout == 0 or self.intended_params is None or self.jitter_params is None:
+            return np.repeat(self.frame_from_world[t][None], len(rows), axis=0)
+        times = t + self.config.readout * rows / self.config.height
+        return _frames_from_world_at(self.intended_params, self.jitter_params, times, self.config)
 
     # ------------------------------------------------------------------ rendering truth
     def world_at(self, t: int) -> np.ndarray:
@@ -347,6 +361,38 @@ def _scaling(s: float) -> np.ndarray:
 def _frame_from_world(cx: float, cy: float, theta: float, zoom: float, fc: tuple[float, float]) -> np.ndarray:
     """Inverse of world_from_frame = T(c) R(theta) S(1/zoom) T(-fc)."""
     return _translation(*fc) @ _scaling(zoom) @ _rotation(-theta) @ _translation(-cx, -cy)
+
+
+def _frames_from_world_at(intended: np.ndarray, jitter: np.ndarray, times: np.ndarray,
+                          cfg: SyntheticConfig) -> np.ndarray:
+    """(len(times), 3, 3) frame_from_world at fractional frame times: the camera's parameters (centre, roll,
+    zoom) interpolated by a cubic spline through their per-frame values (extrapolated past the last frame)."""
+    from scipy.interpolate import CubicSpline  # here: only rolling-shutter clips need it
+
+    params = np.stack([intended[:, 0] + jitter[:, 0], intended[:, 1] + jitter[:, 1], intended[:, 2] + jitter[:, 2],
+                       intended[:, 3] * (1.0 + jitter[:, 3])], axis=1)
+    frames = np.arange(len(params), dtype=np.float64)
+    at = CubicSpline(frames, params, axis=0)(times) if len(params) > 3 else np.repeat(params[:1], len(times), axis=0)
+    # _frame_from_world, vectorised: zoom * R(-theta) on the linear part, the centre c landing on the frame's.
+    cx, cy, theta, zoom = at.T
+    cos, sin = zoom * np.cos(theta), zoom * np.sin(theta)
+    out = np.zeros((len(at), 3, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1], out[:, 2, 2] = cos, sin, -sin, cos, 1.0
+    out[:, 0, 2] = (cfg.width - 1) / 2.0 - (cos * cx + sin * cy)
+    out[:, 1, 2] = (cfg.height - 1) / 2.0 - (-sin * cx + cos * cy)
+    return out
+
+
+def _render_rows(canvas: np.ndarray, row_frame_from_world: np.ndarray, w: int) -> np.ndarray:
+    """A frame whose row y is the canvas seen by camera ``row_frame_from_world[y]`` (bicubic, reflected)."""
+    world_from_row = np.linalg.inv(row_frame_from_world)  # (H, 3, 3), affine
+    xs = np.arange(w, dtype=np.float64)[None, :]
+    ys = np.arange(len(world_from_row), dtype=np.float64)[:, None]
+    m = world_from_row
+    map_x = m[:, 0, 0, None] * xs + m[:, 0, 1, None] * ys + m[:, 0, 2, None]
+    map_y = m[:, 1, 0, None] * xs + m[:, 1, 1, None] * ys + m[:, 1, 2, None]
+    return cv2.remap(canvas, map_x.astype(np.float32), map_y.astype(np.float32), cv2.INTER_CUBIC,
+                     borderMode=cv2.BORDER_REFLECT)
 
 
 def _curr_from_prev(frame_from_world: np.ndarray) -> np.ndarray:
@@ -587,7 +633,13 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
         saved = None
         if obj_pose is not None:
             saved = _composite(canvas, obj_patch, obj_alpha, obj_pose[i])
-        sharp = cv2.warpAffine(canvas, f_act[i][:2], (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        if cfg.readout > 0:  # rows exposed one after another (the object stays at its pose of time i)
+            times = i + cfg.readout * np.arange(h) / h
+            jitter = np.stack([jx, jy, jth, jzm], axis=1)
+            sharp = _render_rows(canvas, _frames_from_world_at(np.stack([icx, icy, ith, izm], axis=1), jitter,
+                                                               times, cfg), w)
+        else:
+            sharp = cv2.warpAffine(canvas, f_act[i][:2], (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
         if saved is not None:
             y0, y1, x0, x1, region = saved
             canvas[y0:y1, x0:x1] = region

@@ -49,7 +49,8 @@ def motion_segment(path: Path, config: stab.StabilizeConfig, frames: range) -> M
     """Pass 1 over one segment; empty where the header promised more frames than the file holds."""
     try:
         return stab.estimate_motion(FileSource(path), config.motion, observer=NullObserver(),
-                                    progress=null_progress, total=None, frames=frames)
+                                    progress=null_progress, total=None, frames=frames,
+                                    keep_tracks=config.rolling_shutter is not None)
     except InputError:
         if frames.start == 0:
             raise
@@ -58,9 +59,10 @@ def motion_segment(path: Path, config: stab.StabilizeConfig, frames: range) -> M
 
 def join_motion(parts: Iterable[MotionPass]) -> MotionPass:
     parts = [p for p in parts if p.statuses]
+    tracks = None if any(p.tracks is None for p in parts) else [pair for p in parts for pair in p.tracks]
     return MotionPass(np.concatenate([p.curr_from_prev for p in parts]),
                       [s for p in parts for s in p.statuses], [t for p in parts for t in p.times_s],
-                      [w for p in parts for w in p.warnings])
+                      [w for p in parts for w in p.warnings], tracks)
 
 
 def render_segment(path: Path, config: stab.StabilizeConfig, frames: range, plan: PathPlan) -> list[FrameResult]:
