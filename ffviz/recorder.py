@@ -32,6 +32,7 @@ from pipeline import geometry
 from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
 from pipeline.stages.motion import MotionEstimate
 from pipeline.results import FrameResult, PathPlan, Stamp
+from pipeline.runtime.colour import ColourDescription, display_rgb
 from pipeline.runtime.video_io import Frame
 from pipeline.stages.deblur import DeblurResult
 from pipeline.stages.smoothing import SmoothingResult
@@ -352,6 +353,7 @@ class RerunRecorder:
         self._tracks: dict[str, VideoTrack] = {}
         self._fps = 30.0
         self._info: Any = None
+        self._colour = ColourDescription()  # the input's (on_start): frames are shown as display RGB by it
         self._config: Any = None
         self._crop: Any = None
         self._warnings = 0
@@ -409,6 +411,7 @@ class RerunRecorder:
         started = time.perf_counter()
         self._size = (info.width, info.height)
         self._info, self._config = info, config
+        self._colour = getattr(info, "colour", None) or ColourDescription()
         try:
             self._fps = float(info.fps) or 30.0
         except (TypeError, ValueError, AttributeError):
@@ -699,7 +702,7 @@ class RerunRecorder:
         self._set_time(stamp)
         self.rec.set_time(ent.STAGE_TIMELINE, sequence=step)
         height, width = rgb.shape[:2]
-        self.rec.log(ent.trace_image(stamp.index), self._image(rgb))
+        self.rec.log(ent.trace_image(stamp.index), self._image(self._display(rgb)))
         self.rec.log(ent.trace_label(stamp.index), rr.Boxes2D(
             array=[0, 0, width, height], array_format=rr.Box2DFormat.XYWH, colors=[LABEL_COLOUR],
             labels=[trace.stage_label(stamp.index, step)], show_labels=True))
@@ -713,7 +716,7 @@ class RerunRecorder:
         if not result.fills:
             return
         inpainted = result.fills[0].inpainted
-        stabilized = np.where(result.missing[..., None], np.uint8(0), result.mosaic.frame)
+        stabilized = np.where(result.missing[..., None], np.uint8(0), self._display(result.mosaic.frame))
         self._set_time(stamp)
         height, width = result.missing.shape
         for step, filled, total, image in trace.fmm_band_images(stabilized, inpainted.flow, inpainted.order):
@@ -731,8 +734,14 @@ class RerunRecorder:
         self.rec.set_time(ent.FRAME_TIMELINE, sequence=stamp.index)
         self.rec.set_time(ent.VIDEO_TIME_TIMELINE, duration=stamp.time_s)
 
+    def _display(self, rgb: np.ndarray) -> np.ndarray:
+        """A frame as a person sees it: 8-bit display RGB by the input's colour description (HDR tone-mapped,
+        BT.2020 mapped into BT.709; 8-bit BT.601/709 frames as they are)."""
+        return display_rgb(rgb, self._colour)
+
     def _frame(self, entity: str, stamp: Stamp, rgb: np.ndarray) -> None:
-        """A frame stream: H.264 samples (or a raw image with --lossless)."""
+        """A frame stream: H.264 samples (or a raw image with --lossless), in display RGB."""
+        rgb = self._display(rgb)
         if self.lossless:
             self.rec.log(entity, self._image(rgb))
             return
@@ -813,6 +822,12 @@ class RerunRecorder:
         if info is not None:
             lines.append(f"- input: `{info.path}`: {info.width}x{info.height}, {float(info.fps):.3f} frames/s, "
                          f"{info.frame_count} frames")
+            colour = getattr(info, "colour", None)
+            if colour is not None:
+                shown = ("tone-mapped from HDR to SDR" if colour.hdr else "BT.2020 mapped into BT.709"
+                         if colour.primaries == 9 else "as decoded")
+                lines.append(f"- colour: {colour.summary()}; the output keeps it. Frames here are 8-bit display "
+                             f"RGB ({shown})")
         lines.append(f"- recorded: `--record {level}`, " + ("lossless images (`--lossless`)" if lossless else
                      "frame streams as H.264 video, masks as lossless PNG, maps as 16-bit PNG"))
         if config is not None:

@@ -197,3 +197,26 @@ def test_display_rgb_shows_hdr_white_near_sdr_white_and_leaves_sdr_alone():
     red = colours.display_rgb(np.array([[[0.75 * 255, 0, 0]]], np.float32),
                               ColourDescription(matrix=9, primaries=9, transfer=18, bit_depth=10))[0, 0]
     assert red[0] > 200 and red[1] == 0 and red[2] == 0
+
+
+def test_the_recording_shows_display_rgb_and_names_the_colour(tmp_path):
+    """An HLG BT.2020 clip's recording shows its frames tone-mapped into BT.709 display RGB (the patch's colour as
+    display_rgb gives it, far from its raw code values), and the about panel names the colour description."""
+    from ffviz import entities as ent
+    from ffviz.rrd import Recording
+
+    path = tmp_path / "hlg.mp4"
+    make_clip(path, "bt2020_hlg_10bit")
+    rrd = tmp_path / "run.rrd"
+    assert cli.main(["stabilize", str(path), "-o", str(tmp_path / "out.mp4"), "--mode", "none", "--rrd", str(rrd),
+                     "--lossless"]) == 0
+    recording = Recording.load(rrd)
+    description = ColourDescription(matrix=9, range=1, primaries=9, transfer=18, bit_depth=10)
+    expected = colours.display_rgb(np.array([[PATCH_RGB]], np.float32), description)[0, 0].astype(float)
+    assert np.abs(expected - PATCH_RGB).max() > 20  # tone mapping and gamut mapping move it well away
+    for entity in (ent.INPUT_FRAME, ent.OUTPUT_FRAME):
+        shown = recording.image(entity, N // 2)
+        assert shown.dtype == np.uint8
+        assert np.abs(shown[REGION].reshape(-1, 3).mean(axis=0) - expected).max() < 2.0, entity
+    meta = recording.texts(ent.META, "TextDocument:text")[-1]
+    assert "tv, bt2020nc, bt2020, arib-std-b67, 10-bit" in meta and "tone-mapped" in meta

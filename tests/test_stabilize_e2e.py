@@ -324,7 +324,7 @@ def test_cli_codec_mpeg4_writes_mpeg4_close_to_the_h264_output_and_refuses_the_o
     assert min(synthetic.psnr(a, b) for a, b in zip(h264_frames, mpeg4_frames)) > 30
     capsys.readouterr()
     for argv, words in ((["--codec", "mpeg4", "--crf", "20"], "--crf does not apply to --codec mpeg4"),
-                        (["--qscale", "4"], "--qscale does not apply to --codec h264"),
+                        (["--qscale", "4"], "--qscale does not apply to --codec auto"),
                         (["--codec", "mpeg4", "--qscale", "40"], "--qscale must be between 2 and 31")):
         out = tmp_path / "refused.mp4"
         assert cli.main(["stabilize", str(path), "-o", str(out), *argv]) == 2

@@ -17,6 +17,7 @@ import struct
 from dataclasses import dataclass
 
 import av
+import cv2
 import numpy as np
 from av.video.reformatter import Interpolation
 
@@ -140,7 +141,8 @@ def describe(frame: av.VideoFrame) -> ColourDescription:
 def to_rgb(frame: av.VideoFrame, colour: ColourDescription, width: int, height: int, *, deep: bool) -> np.ndarray:
     """(height, width, 3) RGB of a decoded picture by the video's matrix and range: uint8, or with ``deep`` (and
     more than 8 bits in the video) float32 on the 0..255 scale."""
-    if frame.format.name in _DEPTHS and (frame.width, frame.height) == (width, height):
+    if frame.format.name in _DEPTHS and (colour.deep or colour.range == FULL) and \
+            (frame.width, frame.height) == (width, height):
         rgb = _yuv420_to_rgb(frame, colour)
         if deep and colour.deep:
             return rgb
@@ -155,32 +157,60 @@ def to_rgb(frame: av.VideoFrame, colour: ColourDescription, width: int, height: 
 
 def from_rgb(rgb: np.ndarray, colour: ColourDescription, pix_fmt: str) -> av.VideoFrame:
     """A 4:2:0 picture in ``pix_fmt`` (yuv420p, yuv420p10le, yuv420p12le; even sizes) from RGB (uint8, or float32 on
-    the 0..255 scale), by the video's matrix and range (exactly, rounded), tagged with its description."""
+    the 0..255 scale), by the video's matrix and range (exactly, rounded), tagged with its description. Chroma of
+    each 2x2 block is sited left (MPEG-2/H.264's default): [1 2 1] / 4 across, the two rows averaged. 8-bit limited
+    range goes through swscale (as exact with these flags, and faster)."""
     depth = _DEPTHS[pix_fmt]
-    kr, kb = _KR_KB.get(colour.matrix, _KR_KB[BT601])
-    rgb = np.asarray(rgb, np.float32) * np.float32(1 / 255)
-    luma = rgb @ np.array([kr, 1 - kr - kb, kb], np.float32)
-    # Chroma of 2x2 blocks, sited left (MPEG-2/H.264's default): [1 2 1] / 4 across, the two rows averaged.
-    pair = (rgb[0::2] + rgb[1::2]) * np.float32(0.5)
-    left = np.concatenate([pair[:, :1], pair[:, 1:-1:2]], axis=1)
-    block = (left + 2 * pair[:, 0::2] + pair[:, 1::2]) * np.float32(0.25)
-    block_luma = block @ np.array([kr, 1 - kr - kb, kb], np.float32)
-    cb = (block[..., 2] - block_luma) * np.float32(0.5 / (1 - kb))
-    cr = (block[..., 0] - block_luma) * np.float32(0.5 / (1 - kr))
-    scale = float(2 ** (depth - 8))
-    if colour.range == FULL:
-        top = 2 ** depth - 1
-        planes = (luma * top, cb * top + 128 * scale, cr * top + 128 * scale)
+    if depth == 8 and colour.range == LIMITED:
+        if rgb.dtype != np.uint8:
+            rgb = np.clip(np.asarray(rgb, np.float32) + np.float32(0.5), 0, 255).astype(np.uint8)
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24").reformat(
+            format=pix_fmt, dst_colorspace=_SWS_MATRIX[colour.matrix], dst_color_range=colour.range,
+            interpolation=_FLAGS_8)
     else:
-        planes = (luma * (219 * scale) + 16 * scale, cb * (224 * scale) + 128 * scale, cr * (224 * scale) + 128 * scale)
-    frame = av.VideoFrame(rgb.shape[1], rgb.shape[0], pix_fmt)
-    dtype = np.uint8 if depth == 8 else np.uint16
-    for plane, values in zip(frame.planes, planes):
-        stored = np.frombuffer(plane, dtype).reshape(plane.height, -1)[:, :plane.width]
-        np.clip(values + np.float32(0.5), 0, 2 ** depth - 1, out=stored, casting="unsafe")
+        frame = _rgb_to_yuv420(np.asarray(rgb, np.float32), colour, pix_fmt, depth)
     frame.colorspace, frame.color_range = colour.matrix, colour.range
     frame.color_primaries, frame.color_trc = colour.primaries, colour.transfer
     return frame
+
+
+def _rgb_to_yuv420(rgb: np.ndarray, colour: ColourDescription, pix_fmt: str, depth: int) -> av.VideoFrame:
+    encode, _ = _yuv_affine(colour, depth)
+    luma = cv2.transform(rgb, encode[:1])
+    # the block's filter, kept at its top-left pixel and picked out by a nearest-neighbour halving
+    blocks = cv2.sepFilter2D(rgb, cv2.CV_32F, _ROW_KERNEL, _COLUMN_KERNEL, anchor=(1, 0),
+                             borderType=cv2.BORDER_REPLICATE)
+    blocks = cv2.resize(blocks, (rgb.shape[1] // 2, rgb.shape[0] // 2), interpolation=cv2.INTER_NEAREST)
+    chroma = cv2.transform(blocks, encode[1:])
+    frame = av.VideoFrame(rgb.shape[1], rgb.shape[0], pix_fmt)
+    dtype = np.uint8 if depth == 8 else np.uint16
+    for plane, values in zip(frame.planes, (luma, chroma[..., 0], chroma[..., 1])):
+        stored = np.frombuffer(plane, dtype).reshape(plane.height, -1)[:, :plane.width]
+        np.clip(values + np.float32(0.5), 0, 2 ** depth - 1, out=stored, casting="unsafe")
+    return frame
+
+
+_ROW_KERNEL = np.array([0.25, 0.5, 0.25], np.float32)  # across: the chroma sample sits on the left pixel
+_COLUMN_KERNEL = np.array([0.5, 0.5], np.float32)  # down: between the two rows
+
+
+def _yuv_affine(colour: ColourDescription, depth: int) -> tuple[np.ndarray, np.ndarray]:
+    """3x4 float32 affine maps R'G'B' (0..255) -> Y'CbCr code values and back, by the matrix and range (ITU-T
+    H.273: limited Y' = (219 E'y + 16) 2^(n-8), Cb = (224 E'pb + 128) 2^(n-8); full Y' = (2^n - 1) E'y, Cb =
+    (2^n - 1) E'pb + 2^(n-1))."""
+    kr, kb = _KR_KB.get(colour.matrix, _KR_KB[BT601])
+    kg = 1 - kr - kb
+    to_ypbpr = np.array([[kr, kg, kb], [-kr / (2 * (1 - kb)), -kg / (2 * (1 - kb)), 0.5],
+                         [0.5, -kg / (2 * (1 - kr)), -kb / (2 * (1 - kr))]]) / 255
+    scale = 2.0 ** (depth - 8)
+    if colour.range == FULL:
+        gains, offsets = np.full(3, 2.0 ** depth - 1), np.array([0, 128, 128]) * scale
+    else:
+        gains, offsets = np.array([219, 224, 224]) * scale, np.array([16, 128, 128]) * scale
+    encode = np.hstack([gains[:, None] * to_ypbpr, offsets[:, None]])
+    to_rgb = np.linalg.inv(to_ypbpr) / gains[None, :]  # code values minus offsets -> R'G'B'
+    decode = np.hstack([to_rgb, -(to_rgb @ offsets)[:, None]])
+    return encode.astype(np.float32), decode.astype(np.float32)
 
 
 def _yuv420_to_rgb(frame: av.VideoFrame, colour: ColourDescription) -> np.ndarray:
@@ -189,33 +219,15 @@ def _yuv420_to_rgb(frame: av.VideoFrame, colour: ColourDescription) -> np.ndarra
     sited: left, between two rows (as from_rgb writes it)."""
     depth = _DEPTHS[frame.format.name]
     dtype = np.uint8 if depth == 8 else np.uint16
-    planes = [np.frombuffer(p, dtype).reshape(p.height, -1)[:, :p.width].astype(np.float32) for p in frame.planes]
-    scale = float(2 ** (depth - 8))
-    if colour.range == FULL:
-        top = np.float32(1 / (2 ** depth - 1))
-        luma, cb, cr = planes[0] * top, (planes[1] - 128 * scale) * top, (planes[2] - 128 * scale) * top
-    else:
-        luma = (planes[0] - np.float32(16 * scale)) * np.float32(1 / (219 * scale))
-        cb, cr = ((c - np.float32(128 * scale)) * np.float32(1 / (224 * scale)) for c in planes[1:])
+    luma, cb, cr = (np.frombuffer(p, dtype).reshape(p.height, -1)[:, :p.width] for p in frame.planes)
     height, width = luma.shape
-    chroma = np.stack([cb, cr], -1)
-    # rows: each chroma row sits between two luma rows: 3/4 of the nearer chroma row, 1/4 of the other
-    above = np.concatenate([chroma[:1], chroma[:-1]])
-    below = np.concatenate([chroma[1:], chroma[-1:]])
-    rows = np.empty((2 * chroma.shape[0], chroma.shape[1], 2), np.float32)
-    rows[0::2] = np.float32(0.75) * chroma + np.float32(0.25) * above
-    rows[1::2] = np.float32(0.75) * chroma + np.float32(0.25) * below
-    # columns: sited on the even luma columns; the odd ones halfway
-    full = np.empty((rows.shape[0], 2 * rows.shape[1], 2), np.float32)
-    full[:, 0::2] = rows
-    full[:, 1::2] = (rows + np.concatenate([rows[:, 1:], rows[:, -1:]], axis=1)) * np.float32(0.5)
-    full = full[:height, :width]
-    kr, kb = _KR_KB.get(colour.matrix, _KR_KB[BT601])
-    red = luma + np.float32(2 * (1 - kr)) * full[..., 1]
-    blue = luma + np.float32(2 * (1 - kb)) * full[..., 0]
-    green = (luma - np.float32(kr) * red - np.float32(kb) * blue) * np.float32(1 / (1 - kr - kb))
-    rgb = np.stack([red, green, blue], -1)
-    return np.clip(rgb * np.float32(255), 0, 255, out=rgb)
+    # chroma sample (i, j) sits at luma (2i, 2j + 0.5): bilinear at (x / 2, y / 2 - 0.25), edges repeated
+    chroma = cv2.merge([cb.astype(np.float32), cr.astype(np.float32)])
+    chroma = cv2.warpAffine(chroma, np.array([[0.5, 0, 0], [0, 0.5, -0.25]]), (width, height),
+                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    _, decode = _yuv_affine(colour, depth)
+    rgb = cv2.transform(cv2.merge([luma.astype(np.float32), chroma]), decode)
+    return np.clip(rgb, 0, 255, out=rgb)
 
 
 def tag_stream(context: av.codec.context.CodecContext, colour: ColourDescription) -> None:
