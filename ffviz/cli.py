@@ -56,6 +56,8 @@ examples:
       record to runs/a.rrd and follow frames 10 and 40 through every stage
   ffviz stabilize big.mov -o steady.mp4 --codec mpeg4 --workers 1
       cheaper encoder, one thread
+  ffviz stabilize long.mp4 -o try.mp4 --preview 5 --start 60 --compare try_sbs.mp4
+      try settings on 5 s from 1:00 only, and write it beside the input (ffviz compare) to look at
 
 exit status: 0 done, 2 bad input or option, 3 output problem, 130 interrupted, 143 terminated."""
 
