@@ -117,7 +117,8 @@ def smoothing_tab() -> rrb.Container:
     return rrb.Vertical(
         rrb.Horizontal(
             rrb.Vertical(_trajectory_view(("x",), "px"), _trajectory_view(("y",), "px"),
-                         _trajectory_view(("angle",), "deg")),
+                         _trajectory_view(("angle",), "deg"), _trajectory_view(("zoom",), "%"),
+                         rrb.TimeSeriesView(name="crop scale (--mode crop)", origin=f"/{ent.CROP_SCALE}")),
             rrb.Vertical(
                 _image("stabilized (eq. 19); crop window in yellow (--mode crop)", ent.STABILIZED_FRAME,
                        ent.CROP_WINDOW),

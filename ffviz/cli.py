@@ -17,7 +17,7 @@ from typing import Sequence
 
 from ffviz.runner import DEFAULT_RECORDINGS, output_encoding, run_stabilize, stabilize_config
 from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (tests call cli.view_command)
-from pipeline.stages import deblur, motion, smoothing
+from pipeline.stages import adaptive_crop, deblur, motion, smoothing
 from pipeline import stabilize as stab
 from pipeline.runtime import video_io
 from pipeline.errors import ConfigError, FFVizError
@@ -212,6 +212,29 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--horizon-lock", action="store_true",
                    help="keep the output's rotation at that of each shot's first frame, with any --path "
                         "(the turned frames' corners are completed, or cropped with --mode crop)")
+    p.add_argument("--smoothness", default=None, metavar="S|t=S,r=S,z=S",
+                   help="how smooth the camera path is, 0-100: 0 follows the input, 50 is the default path, 100 the "
+                        "smoothest; one S for every axis or per axis (t translation, r rotation, z zoom; left out: "
+                        "50); gaussian: radius 30 (S/50)^2 per axis instead of -k; l1: its margins times S/50 "
+                        "(default: -k, or l1's margins)")
+    p.add_argument("--max-shift", type=float, default=None, metavar="PX",
+                   help="no output frame's centre lies further than PX pixels (x and y each) from its input frame's, "
+                        "with any --path (default: no bound)")
+    p.add_argument("--max-angle", type=float, default=None, metavar="DEG",
+                   help="no output frame turns more than DEG degrees from its input frame, with any --path "
+                        "(default: no bound)")
+    p.add_argument("--path-segment", action="append", default=[], metavar="T0-T1:PATH[:S]",
+                   help="plan the seconds T0-T1 with their own path and smoothness, e.g. 0-5:tripod or "
+                        "5-:gaussian:80 (either end may be left out; the rest of the clip follows --path); the path "
+                        "eases from one setting into the next over a second, without a jump; may be given several "
+                        "times (default: none)")
+    p.add_argument("--crop", choices=adaptive_crop.CROPS, default="fixed",
+                   help="with --mode crop: fixed, one window valid in every frame; adaptive, a window whose zoom "
+                        "follows the path (wider where the camera is calm), never showing black (default: "
+                        "%(default)s)")
+    p.add_argument("--zoom-speed", type=float, default=adaptive_crop.DEFAULT_ZOOM_SPEED, metavar="PCT",
+                   help="with --crop adaptive: how fast the zoom may change, in %% of the frame a frame "
+                        "(default: %(default)s)")
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
                    help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "
                         "shear) or homography (also perspective) (default: %(default)s)")

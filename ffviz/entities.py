@@ -14,16 +14,20 @@ MOTION_INLIER_RATIO = "motion/inlier_ratio"
 MOTION_RESIDUAL = "motion/residual_px"
 MOTION_STATUS = "motion/status"
 MOTION_FEATURES = "motion/features"  # /points (tracked corners in frame t), /arrows (prev -> curr)
-TRAJECTORY_ORIGINAL = "motion/trajectory/original"  # /{x,y,angle}
+TRAJECTORY_ORIGINAL = "motion/trajectory/original"  # /{x,y,angle,zoom}
 TRAJECTORY_SMOOTHED = "motion/trajectory/smoothed"
-TRAJECTORY_AXES = ("x", "y", "angle")
+TRAJECTORY_AXES = ("x", "y", "angle", "zoom")  # px, px, degrees, % of the shot's first frame's scale
+PATH_SETTING = "motion/trajectory/setting"  # index of the path setting each frame was planned with (Scalars)
+PATH_SETTINGS = "motion/trajectory/settings"  # the settings, one a line, in the command line's words (static text)
 MOTION_PARAM_NAMES = ("dx", "dy", "angle", "scale")
 
 STABILIZED_FRAME = "stabilized/frame"
 STABILIZED_MISSING = "stabilized/missing"
 
 OUTPUT_FRAME = "output/frame"
-CROP_WINDOW = "stabilized/crop"  # --mode crop: the window kept of every stabilized frame (Boxes2D, static)
+CROP_WINDOW = "stabilized/crop"  # --mode crop: the window kept of every stabilized frame (Boxes2D, static;
+# per frame with --crop adaptive)
+CROP_SCALE = "stabilized/crop_scale"  # --mode crop: the window's scale per frame (Scalars)
 
 # Frame streams: H.264 VideoStream by default (lossy, ~0.01 MB a frame); raw images with --lossless.
 # deblur/before and deblur/after are sparse video streams too (sharpened frames only, cleared in between).

@@ -127,10 +127,14 @@ def _series(recording: Recording, entity: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def trajectories(recording: Recording, requested: Sequence[int] | None = None) -> Figure:
-    units = {"x": "x (px)", "y": "y (px)", "angle": "angle (deg)"}
-    fig = Figure(figsize=(8, 6.5), dpi=DPI, layout="constrained")
-    axes = fig.subplots(len(ent.TRAJECTORY_AXES), 1, sharex=True)
-    for ax, axis in zip(axes, ent.TRAJECTORY_AXES):
+    """The camera path per axis, original against smoothed; where path settings change (--path-segment) each
+    stretch is shaded and labelled with its setting."""
+    units = {"x": "x (px)", "y": "y (px)", "angle": "angle (deg)", "zoom": "zoom (%)"}
+    axis_names = [a for a in ent.TRAJECTORY_AXES if len(recording.scalars(f"{ent.TRAJECTORY_ORIGINAL}/{a}")[0])]
+    fig = Figure(figsize=(8, 1.9 * len(axis_names) + 0.8), dpi=DPI, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(axis_names), 1, sharex=True))
+    stretches = _setting_stretches(recording)
+    for ax, axis in zip(axes, axis_names):
         frames, original = _series(recording, f"{ent.TRAJECTORY_ORIGINAL}/{axis}")
         smoothed_frames, smoothed = _series(recording, f"{ent.TRAJECTORY_SMOOTHED}/{axis}")
         # The viewer's colours (visual.TRAJECTORY_COLOURS): original warm, smoothed cool.
@@ -138,12 +142,33 @@ def trajectories(recording: Recording, requested: Sequence[int] | None = None) -
                 label="original")
         ax.plot(smoothed_frames, smoothed, color=visual.hex_colour(visual.TRAJECTORY_COLOURS["smoothed", axis]),
                 linewidth=1.6, label="smoothed")
+        for k, (first, last, _) in enumerate(stretches):
+            if k % 2:
+                ax.axvspan(first - 0.5, last + 0.5, color="0.5", alpha=0.12, linewidth=0)
         ax.set_ylabel(units[axis])
         ax.grid(alpha=0.3)
+    for first, last, label in stretches if len(stretches) > 1 else ():
+        axes[0].annotate(label, xy=((first + last) / 2, 1.0), xycoords=("data", "axes fraction"), ha="center",
+                         va="bottom", fontsize=7)
     axes[0].legend(loc="best", fontsize=8)
     axes[-1].set_xlabel("frame")
-    fig.suptitle("Camera trajectory: original and smoothed (eq. 18)")
+    settings = sorted({label for _, _, label in stretches})
+    fig.suptitle("Camera trajectory: original and smoothed" + (f" ({settings[0]})" if len(settings) == 1 else ""))
     return fig
+
+
+def _setting_stretches(recording: Recording) -> list[tuple[int, int, str]]:
+    """(first frame, last frame, setting) of each stretch planned with one path setting; [] when not recorded."""
+    frames, index = recording.scalars(ent.PATH_SETTING)
+    texts = recording.texts(ent.PATH_SETTINGS, "TextDocument:text")
+    labels = texts[-1].split("\n") if texts else []
+    if len(frames) == 0 or not labels:
+        return []
+    index = index.astype(int)
+    starts = [0, *np.flatnonzero(np.diff(index)) + 1]
+    ends = [*(s - 1 for s in starts[1:]), len(index) - 1]
+    return [(int(frames[a]), int(frames[b]), labels[index[a]] if index[a] < len(labels) else "?")
+            for a, b in zip(starts, ends)]
 
 
 def stabilized_vs_original(recording: Recording, requested: Sequence[int] | None = None) -> Figure:

@@ -35,6 +35,7 @@ from pipeline.results import FrameResult, PathPlan, Stamp
 from pipeline.runtime.colour import ColourDescription, display_rgb
 from pipeline.runtime.video_io import Frame
 from pipeline.stages.deblur import DeblurResult
+from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages.smoothing import SmoothingResult
 from pipeline.stages.warping import CropWindow, WarpResult
 
@@ -103,6 +104,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "orig_from_out": NotRecorded("equal to the smoothed path but for the crop, both recorded"),
         "rolling_shutter": Nested("Correction"),
         "crop": Nested("CropWindow"),
+        "adaptive_crop": Nested("AdaptiveCrop"),
         "warnings": (ent.LOG,),
     },
     "MotionPass": {
@@ -117,8 +119,17 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "segment_starts": NotRecorded("scene cuts; the trajectories restart there"),
         "original_trajectory": _TRAJECTORY[ent.TRAJECTORY_ORIGINAL],
         "smoothed_trajectory": _TRAJECTORY[ent.TRAJECTORY_SMOOTHED],
+        "settings": (ent.PATH_SETTINGS,),
+        "setting_of": (ent.PATH_SETTING,),
     },
-    "CropWindow": {"x0": (ent.CROP_WINDOW,), "y0": (ent.CROP_WINDOW,), "scale": (ent.CROP_WINDOW, ent.META)},
+    "AdaptiveCrop": {
+        "scales": (ent.CROP_SCALE, ent.CROP_WINDOW),
+        "anchor": (ent.CROP_WINDOW,),
+        "width": NotRecorded("the frame's size"),
+        "height": NotRecorded("the frame's size"),
+    },
+    "CropWindow": {"x0": (ent.CROP_WINDOW,), "y0": (ent.CROP_WINDOW,),
+                   "scale": (ent.CROP_WINDOW, ent.CROP_SCALE, ent.META)},
     "Correction": {  # --rolling-shutter
         "readout": NotRecorded("not drawn yet"),
         "rows": Nested("RowMotion"),
@@ -356,6 +367,7 @@ class RerunRecorder:
         self._colour = ColourDescription()  # the input's (on_start): frames are shown as display RGB by it
         self._config: Any = None
         self._crop: Any = None
+        self._adaptive: AdaptiveCrop | None = None
         self._warnings = 0
         self._started = time.perf_counter()
         self._cpu_started = time.process_time()
@@ -544,9 +556,33 @@ class RerunRecorder:
         self._on_smoothing(plan.smoothing)
         if plan.crop is not None:
             self._on_crop(plan.crop)
+            self._on_crop_scales(np.full(len(plan.orig_from_out), plan.crop.scale))
+        if plan.adaptive_crop is not None:
+            self._adaptive = plan.adaptive_crop
+            self._on_crop_scales(plan.adaptive_crop.scales)
+
+    def _on_crop_scales(self, scales: np.ndarray) -> None:
+        """--mode crop: the window's scale per frame (constant for one window; --crop adaptive's follows the path)."""
+        frames = np.arange(len(scales))
+        times = np.array([self._times.get(int(t), 0.0) for t in frames])
+        self.rec.send_columns(ent.CROP_SCALE, indexes=[rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
+                                                       rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)],
+                              columns=rr.Scalars.columns(scalars=scales))
+
+    def _on_adaptive_window(self, stamp: Stamp, crop: AdaptiveCrop) -> None:
+        """--crop adaptive: this frame's window of the stabilized frame, drawn over it."""
+        width, height = self._size
+        scale = float(crop.scales[min(stamp.index, len(crop.scales) - 1)])
+        x0, y0 = crop.anchor[0] - scale * (width - 1) / 2.0, crop.anchor[1] - scale * (height - 1) / 2.0
+        self._set_time(stamp)
+        self.rec.log(ent.CROP_WINDOW, rr.Boxes2D(
+            array=[x0, y0, scale * width, scale * height], array_format=rr.Box2DFormat.XYWH, colors=[CROP_COLOUR],
+            radii=1.5, labels=[f"crop window: {scale ** 2:.0%} of the area (adaptive)"], show_labels=True))
 
     def _on_frame(self, result: FrameResult) -> None:
         stamp = result.stamp
+        if self._adaptive is not None:
+            self._on_adaptive_window(stamp, self._adaptive)
         if result.input is not None:
             self._on_input(stamp, result.input)
         if result.warp is not None:
@@ -567,6 +603,11 @@ class RerunRecorder:
             for column, axis in enumerate(ent.TRAJECTORY_AXES):
                 self.rec.send_columns(f"{root}/{axis}", indexes=indexes,
                                       columns=rr.Scalars.columns(scalars=values[:, column]))
+        # Which path setting planned each frame (--path, --smoothness, --path-segment), by index into the list.
+        if result.setting_of is not None:
+            self.rec.send_columns(ent.PATH_SETTING, indexes=indexes,
+                                  columns=rr.Scalars.columns(scalars=result.setting_of.astype(np.float64)))
+        self.rec.log(ent.PATH_SETTINGS, rr.TextDocument("\n".join(result.settings)), static=True)
         n = len(frames)
         if self._trace_requested is None:
             count = trace.DEFAULT_TRACED if self.level == "full" else 0

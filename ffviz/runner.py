@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from pipeline.stages import deblur, motion, smoothing
+from pipeline.stages import adaptive_crop, deblur, motion, path_control, smoothing
 from pipeline import stabilize as stab
 from pipeline.runtime import video_io
 from pipeline.errors import ConfigError
@@ -40,6 +40,11 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.smoothing_sigma is not None and not MIN_SIGMA <= args.smoothing_sigma <= MAX_SIGMA:  # False for nan
         raise ConfigError(f"--smoothing-sigma must be between {MIN_SIGMA:g} and {MAX_SIGMA:g} frames, "
                           f"not {args.smoothing_sigma}")
+    if getattr(args, "smoothness", None) is not None and (args.smoothing_radius != smoothing.DEFAULT_RADIUS
+                                                          or args.smoothing_sigma is not None):
+        raise ConfigError("--smoothness sets eq. 18's radius per axis: give it or -k/--smoothing-sigma, not both")
+    if getattr(args, "crop", "fixed") != "fixed" and args.mode != "crop":
+        raise ConfigError(f"--crop {args.crop} chooses --mode crop's window; it does not apply to --mode {args.mode}")
 
 
 def parse_ignore(text: str) -> motion.IgnoreRegion:
@@ -70,8 +75,14 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
             smoothing=smoothing.SmoothingConfig(
                 radius=args.smoothing_radius, sigma=args.smoothing_sigma,
                 path="tripod" if getattr(args, "tripod", False) else getattr(args, "path", "gaussian"),
-                horizon_lock=getattr(args, "horizon_lock", False)),
+                horizon_lock=getattr(args, "horizon_lock", False),
+                smoothness=(path_control.Smoothness.parse(args.smoothness)
+                            if getattr(args, "smoothness", None) is not None else None),
+                max_shift=getattr(args, "max_shift", None), max_angle=getattr(args, "max_angle", None),
+                segments=tuple(path_control.PathSegment.parse(text) for text in getattr(args, "path_segment", []))),
             deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
+            crop=adaptive_crop.CropConfig(kind=getattr(args, "crop", "fixed"),
+                                          zoom_speed=getattr(args, "zoom_speed", adaptive_crop.DEFAULT_ZOOM_SPEED)),
             rolling_shutter=getattr(args, "rolling_shutter", None),
         )
     except ValueError as error:  # the configs validate their own values
@@ -196,7 +207,10 @@ def written_line(files: Sequence[tuple[Path, str]], rrd_path: Path | None) -> st
 def _print_report(report: stab.StabilizeReport, rrd_path: Path | None) -> None:
     lines = [f"stabilized {report.n_frames} frames in {report.seconds:.1f} s "
              f"({report.n_frames / max(report.seconds, 1e-9):.1f} frames/s) -> {report.output_path}"]
-    if report.crop is not None:
+    if report.crop is not None and hasattr(report.crop, "scales"):  # --crop adaptive
+        lines.append(f"crop: kept {report.crop.cropping_ratio:.1%} of the frame area on average (scale "
+                     f"{report.crop.scales.min():.3f}-{report.crop.scales.max():.3f})")
+    elif report.crop is not None:
         lines.append(f"crop: kept {report.crop.cropping_ratio:.1%} of the frame area (scale {report.crop.scale:.3f})")
     if report.cuts:
         lines.append(f"scene cuts at frames {', '.join(map(str, report.cuts))}")

@@ -41,7 +41,8 @@ def finite_or_nan(values: np.ndarray) -> np.ndarray:
 # Camera path: original in warm colours, smoothed in cool ones; x and y told apart within each.
 TRAJECTORY_COLOURS = {("original", "x"): (235, 80, 60), ("original", "y"): (245, 175, 40),
                       ("original", "angle"): (235, 80, 60), ("smoothed", "x"): (50, 130, 245),
-                      ("smoothed", "y"): (60, 210, 200), ("smoothed", "angle"): (50, 130, 245)}
+                      ("smoothed", "y"): (60, 210, 200), ("smoothed", "angle"): (50, 130, 245),
+                      ("original", "zoom"): (235, 80, 60), ("smoothed", "zoom"): (50, 130, 245)}
 VARIANCE_RANGE = (0.0, 400.0)  # intensity^2: the variance map's colour range (4x the default threshold)
 ARRIVAL_RANGE = (0.0, 60.0)  # px
 

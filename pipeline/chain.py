@@ -22,7 +22,7 @@ from pipeline.runtime import parallel, video_io
 from pipeline.runtime.source import FrameSource, one_pass
 from pipeline.runtime.window import Windowed, sliding_window
 from pipeline.stages import rolling_shutter
-from pipeline.stages import completion, deblur, neighbours, smoothing, warping
+from pipeline.stages import adaptive_crop, completion, deblur, neighbours, smoothing, warping
 
 import numpy as np
 
@@ -40,16 +40,33 @@ def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, heig
                                           height, config.motion.model)
     corrected = dataclasses.replace(motion_pass, curr_from_prev=correction.curr_from_prev)
     plan = _plan_views(corrected, config, width, height)
+    if plan.adaptive_crop is not None:  # the same for each frame's window
+        valid = np.stack([rows.valid_box(width) for rows in correction.rows])
+        adaptive = adaptive_crop.adaptive_crop(plan.smoothing.orig_from_stab, width, height,
+                                               zoom_speed=config.crop.zoom_speed,
+                                               segment_starts=plan.smoothing.segment_starts, valid=valid)
+        stab = plan.smoothing.orig_from_stab
+        plan = dataclasses.replace(plan, adaptive_crop=adaptive,
+                                   orig_from_out=stab if adaptive is None else stab @ adaptive.stab_from_out)
     return dataclasses.replace(plan, motion=motion_pass, rolling_shutter=correction)
 
 
 def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
     """plan_path for frames each seen from one camera position."""
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
-                                width=width, height=height)
+                                width=width, height=height, times_s=motion_pass.times_s)
     warnings = [SINGLE_FRAME_WARNING] if motion_pass.n_frames == 1 else []
     warnings += smoothing.path_warnings(smoothed, config.smoothing)
     orig_from_out, crop = smoothed.orig_from_stab, None
+    if config.mode == "crop" and config.crop.kind == "adaptive":
+        adaptive = adaptive_crop.adaptive_crop(smoothed.orig_from_stab, width, height,
+                                               zoom_speed=config.crop.zoom_speed,
+                                               segment_starts=smoothed.segment_starts)
+        if adaptive is None:
+            warnings.append(NO_CROP_WARNING)
+            return PathPlan(motion_pass, smoothed, orig_from_out, None, warnings)
+        return PathPlan(motion_pass, smoothed, smoothed.orig_from_stab @ adaptive.stab_from_out, None, warnings,
+                        adaptive_crop=adaptive)
     if config.mode == "crop":
         crop = warping.largest_crop(smoothed.orig_from_stab, width, height)
         if crop is None:

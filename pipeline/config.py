@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from pipeline.errors import ConfigError
+from pipeline.stages.adaptive_crop import CropConfig
 from pipeline.stages import completion, deblur, motion, rolling_shutter, smoothing
 
 OutputMode = Literal["full", "none", "crop"]
@@ -20,6 +21,7 @@ class StabilizeConfig:
     smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
     completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
     deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
+    crop: CropConfig = field(default_factory=CropConfig)  # --mode crop's window: fixed or adaptive
     rolling_shutter: float | str | None = None  # readout time (fraction of a frame; "0.9" is read), "auto", None: off
 
     def __post_init__(self) -> None:

@@ -15,6 +15,7 @@ import numpy as np
 
 from pipeline.runtime.video_io import Frame
 from pipeline.stages.completion import CompletionResult
+from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages.deblur import DeblurResult
 from pipeline.stages.rolling_shutter import Correction, Tracks
 from pipeline.stages.smoothing import SmoothingResult
@@ -62,8 +63,9 @@ class PathPlan:
     motion: MotionPass
     smoothing: SmoothingResult
     orig_from_out: np.ndarray  # (N, 3, 3): output pixel -> input pixel (orig_from_stab, times the crop in crop mode)
-    crop: CropWindow | None  # crop mode only; None also where no area is common to all frames
+    crop: CropWindow | None  # crop mode with one window; None also where no area is common to all frames
     warnings: list[str]  # about the path as a whole (limits reached, crop given up, a single frame)
+    adaptive_crop: AdaptiveCrop | None = None  # crop mode with --crop adaptive: a window per frame
     rolling_shutter: Correction | None = None  # --rolling-shutter: each frame's rows against its middle row
 
 

@@ -22,6 +22,7 @@ from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.observer import NullObserver, Observer, ProgressFactory, is_null, null_progress
 from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, one_pass
+from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages import motion, rolling_shutter, warping
 
 __all__ = ["OUTPUT_MODES", "OutputMode", "StabilizeConfig", "MotionPass", "PathPlan", "FrameResult", "FrameChain",
@@ -34,7 +35,7 @@ class StabilizeReport:
     output_path: Path | None
     n_frames: int
     mode: str
-    crop: warping.CropWindow | None
+    crop: warping.CropWindow | AdaptiveCrop | None  # the fixed window, or the adaptive crop's windows
     cuts: list[int]
     fallbacks: list[int]
     warnings: list[tuple[int | None, str]]
@@ -271,7 +272,8 @@ def run_passes(info: video_io.VideoInfo, output_path: Path | None, config: Stabi
         raise
     report = StabilizeReport(
         input_path=info.path, output_path=output_path, n_frames=motion_result.n_frames, mode=config.mode,
-        crop=plan.crop, cuts=motion_result.cuts, fallbacks=motion_result.fallbacks, warnings=warnings,
+        crop=plan.crop or plan.adaptive_crop, cuts=motion_result.cuts, fallbacks=motion_result.fallbacks,
+        warnings=warnings,
         seconds_motion=seconds_motion, seconds_render=time.perf_counter() - started,
     )
     observer.on_finish(report)

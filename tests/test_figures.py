@@ -37,7 +37,7 @@ def expected_panels(deblurred: dict) -> dict[str, int]:
     blurriest = sorted(sharpened, key=lambda t: -deblurred[t].blurriness)[:figures.MAX_DEBLUR_FRAMES]
     deblur_rows = [t for t in FRAMES if t in sharpened] or blurriest
     return {
-        "trajectories": 3,  # x, y, angle
+        "trajectories": 4,  # x, y, angle, zoom
         "stabilized_vs_original": 2 * len(FRAMES),
         "completed_vs_stabilized": 2 * len(FRAMES),
         "motion_inpainting": figures.FMM_COLUMNS * len(TRACED),

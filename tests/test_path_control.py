@@ -183,3 +183,72 @@ def test_adaptive_crop_keeps_more_than_the_fixed_crop_at_no_more_jitter_and_no_b
     grown = adaptive_crop.AdaptiveCrop(np.minimum(adaptive.scales * 1.02, 1.0), adaptive.anchor, W, H)
     grown_out = path.orig_from_stab @ grown.stab_from_out
     assert any(warping.warp_frame(video.frames[t], grown_out[t]).missing.any() for t in range(video.n_frames))
+
+
+def test_the_recording_holds_each_setting_path_and_crop_and_the_figure_shows_them(tmp_path):
+    """A run with a tripod segment, a smoothness and the adaptive crop, recorded and read back: the original and
+    smoothed paths (x, y, angle, zoom) equal the plan's, each frame's setting is there with its label, the crop scale
+    per frame is the plan's, and the trajectory figure shades and labels the two stretches."""
+    from ffviz import entities as ent, figures
+    from ffviz.recorder import RerunRecorder
+    from ffviz.rrd import Recording
+    from pipeline.evaluation import synthetic
+    from pipeline.runtime.observer import Observers, StageCollector
+    from pipeline.stabilize import StabilizeConfig, stabilize
+
+    video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=45, seed=3,
+                                                         blurred_frames=(), moving_object=False))
+    source = tmp_path / "in.mp4"
+    synthetic.write_video(video, source)
+    config = StabilizeConfig(mode="crop", crop=adaptive_crop.CropConfig(kind="adaptive"),
+                             smoothing=smoothing.SmoothingConfig(
+                                 smoothness=path_control.Smoothness(70, 30, 50),
+                                 segments=(path_control.PathSegment.parse("-0.5:tripod"),)))
+    rrd = tmp_path / "run.rrd"
+    collector = StageCollector("path")
+    stabilize(source, None, config, observer=Observers(RerunRecorder(rrd, level="summary"), collector))
+    [(_, plan)] = collector.results["path"]
+    recording = Recording.load(rrd)
+    frames, setting = recording.scalars(ent.PATH_SETTING)
+    assert list(setting.astype(int)) == [1] * 15 + [0] * 30  # 0.5 s at 30 frames/s
+    assert recording.texts(ent.PATH_SETTINGS, "TextDocument:text")[-1].split("\n") == [
+        "gaussian:t=70,r=30,z=50", "0-0.5:tripod"]
+    for axis in ent.TRAJECTORY_AXES:
+        original = recording.scalars(f"{ent.TRAJECTORY_ORIGINAL}/{axis}")[1]
+        smoothed = recording.scalars(f"{ent.TRAJECTORY_SMOOTHED}/{axis}")[1]
+        assert len(original) == len(smoothed) == 45
+        column = ent.TRAJECTORY_AXES.index(axis)
+        np.testing.assert_allclose(original, plan.smoothing.original_trajectory[:, column], atol=1e-4)
+        np.testing.assert_allclose(smoothed, plan.smoothing.smoothed_trajectory[:, column], atol=1e-4)
+    scales = recording.scalars(ent.CROP_SCALE)[1]
+    assert len(scales) == 45 and 0.3 < scales.min() <= scales.max() <= 1.0
+    np.testing.assert_allclose(scales, plan.adaptive_crop.scales, atol=1e-6)
+    fig = figures.trajectories(recording)
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert "0-0.5:tripod" in texts and "gaussian:t=70,r=30,z=50" in texts
+    assert len(fig.axes) == 4
+
+
+def test_cli_path_control_options_end_to_end(tmp_path, capsys):
+    from ffviz import cli
+    from pipeline.evaluation import synthetic
+    from pipeline.runtime import video_io
+
+    video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30, seed=3,
+                                                         blurred_frames=(), moving_object=False))
+    source = tmp_path / "shaky.mp4"
+    synthetic.write_video(video, source)
+    out = tmp_path / "out.mp4"
+    assert cli.main(["stabilize", str(source), "-o", str(out), "--mode", "crop", "--crop", "adaptive", "--no-deblur",
+                     "--smoothness", "t=80,z=20", "--max-shift", "10", "--max-angle", "1",
+                     "--path-segment", "0-0.5:tripod", "--path-segment", "0.5-:l1:60"]) == 0
+    assert video_io.probe_video(out).frame_count == 30
+    assert "on average" in capsys.readouterr().out
+    for bad, words in ((["--smoothness", "t=120"], "between 0 and 100"), (["--path-segment", "5:l1"], "T0-T1:PATH"),
+                       (["--path-segment", "0-5:tripod", "--path-segment", "4-:l1"], "overlap"),
+                       (["--crop", "adaptive"], "--mode crop"), (["--smoothness", "60", "-k", "10"], "not both"),
+                       (["--max-shift", "-1"], ">= 0"), (["--tripod", "--smoothness", "60"], "tripod")):
+        assert cli.main(["stabilize", str(source), "-o", str(tmp_path / "x.mp4"), *bad]) == 2, bad
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], (bad, err)
+    assert not (tmp_path / "x.mp4").exists()

@@ -54,9 +54,11 @@ class AdaptiveCrop:
         return float(np.mean(self.scales**2))
 
 
-def largest_scales(orig_from_stab: np.ndarray, width: int, height: int, anchor: tuple[float, float]) -> np.ndarray:
+def largest_scales(orig_from_stab: np.ndarray, width: int, height: int, anchor: tuple[float, float],
+                   valid: np.ndarray | None = None) -> np.ndarray:
     """(N,) the largest scale of a window of the frame's aspect ratio centred on ``anchor`` inside each frame's
-    valid region and inside the frame; <= 0 where the anchor has no input pixel."""
+    valid region and inside the frame; <= 0 where the anchor has no input pixel. ``valid``: (N, 4, 2) each
+    frame's valid region in its own coordinates, a convex quad (default: the frame)."""
     corners = geometry.frame_corners(width, height)
     centre = np.asarray(anchor, np.float64)
     spokes = corners - corners.mean(axis=0)  # window corner k at anchor + z * spokes[k]
@@ -77,8 +79,8 @@ def largest_scales(orig_from_stab: np.ndarray, width: int, height: int, anchor: 
         return best
 
     in_frame = bound(corners)
-    return np.array([min(in_frame, bound(geometry.apply(np.linalg.inv(s_t), corners)))
-                     for s_t in np.asarray(orig_from_stab, np.float64)])
+    return np.array([min(in_frame, bound(geometry.apply(np.linalg.inv(s_t), corners if valid is None else valid[t])))
+                     for t, s_t in enumerate(np.asarray(orig_from_stab, np.float64))])
 
 
 def smooth_scales(largest: np.ndarray, rate: float, radius: int = SMOOTH_RADIUS) -> np.ndarray:
@@ -104,13 +106,14 @@ def smooth_scales(largest: np.ndarray, rate: float, radius: int = SMOOTH_RADIUS)
 
 
 def adaptive_crop(orig_from_stab: np.ndarray, width: int, height: int, *, zoom_speed: float = DEFAULT_ZOOM_SPEED,
-                  segment_starts: Sequence[int] = (0,)) -> AdaptiveCrop | None:
+                  segment_starts: Sequence[int] = (0,), valid: np.ndarray | None = None) -> AdaptiveCrop | None:
     """The adaptive crop of a path (``zoom_speed`` in % of the frame a frame), shot by shot, about whichever
     keeps more on average: the frame centre, or the centre of the fixed crop (``warping.largest_crop``; about
-    it every frame keeps at least the fixed crop's area). None when no frame centre has a usable window."""
+    it every frame keeps at least the fixed crop's area). None when no frame centre has a usable window.
+    ``valid``: as ``largest_scales``'."""
     from pipeline.stages import warping
 
-    fixed = warping.largest_crop(orig_from_stab, width, height)
+    fixed = warping.largest_crop(orig_from_stab, width, height, valid=valid)
     centre = ((width - 1) / 2.0, (height - 1) / 2.0)
     anchors = [centre]
     if fixed is not None:
@@ -119,7 +122,7 @@ def adaptive_crop(orig_from_stab: np.ndarray, width: int, height: int, *, zoom_s
     ends = [*starts[1:], len(orig_from_stab)]
     best: AdaptiveCrop | None = None
     for anchor in anchors:
-        largest = largest_scales(orig_from_stab, width, height, anchor) * (1.0 - EDGE_SLACK)
+        largest = largest_scales(orig_from_stab, width, height, anchor, valid) * (1.0 - EDGE_SLACK)
         if len(largest) == 0 or largest.min() < MIN_SCALE:
             continue
         scales = np.concatenate([smooth_scales(largest[a:b], zoom_speed / 100.0) for a, b in zip(starts, ends)])

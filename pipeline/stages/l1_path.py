@@ -31,6 +31,9 @@ from pipeline.errors import ConfigError
 
 # Grundmann et al.'s weights: constant-velocity and constant-acceleration pieces are cheap, jerk is expensive.
 WEIGHTS = (10.0, 1.0, 100.0)
+# Cost of |P - C| a frame, times the smallest weight: over a 600-frame window it cannot pay for one unit of
+# motion (6e-2 < 1), so it only chooses among equally smooth paths the one nearest the input.
+DEPARTURE_WEIGHT = 1e-4
 # Tripod: how far a held frame may depart from its input before the path has to move (completion fills the rest).
 TRIPOD_MARGIN_FRACTION = 0.1
 TRIPOD_MARGIN_DEG = 4.0
@@ -90,7 +93,10 @@ def plan(original: np.ndarray, margin: float | np.ndarray, weights: tuple[float,
 
 def _solve(original: np.ndarray, lower: np.ndarray, upper: np.ndarray, weights: tuple[float, float, float]
            ) -> np.ndarray:
-    """One linear program: variables P (n), then slacks e1, e2, e3 of the differences of orders 1, 2, 3."""
+    """One linear program: variables P (n), then slacks e1, e2, e3 of the differences of orders 1, 2, 3, then e0 of
+    the departure |P - C|, at a cost too small to trade any smoothness for (DEPARTURE_WEIGHT): where many paths
+    are equally smooth (a tripod's constant may sit anywhere within every margin) it picks the one nearest the
+    input, not a corner of the feasible set."""
     import scipy.optimize  # here, not at the top: ~0.5 s of start-up a run on eq. 18's path does not need
     import scipy.sparse
     n = len(original)
@@ -102,7 +108,7 @@ def _solve(original: np.ndarray, lower: np.ndarray, upper: np.ndarray, weights: 
     scale = max(float(np.max(upper - lower)), 1e-9)
     lo, hi = (lower - offset) / scale, (upper - offset) / scale
     sizes = [n - k for k in orders]
-    n_vars = n + sum(sizes)
+    n_vars = n + sum(sizes) + n
     cost = np.zeros(n_vars)
     blocks, rows = [], []
     column = n
@@ -117,9 +123,17 @@ def _solve(original: np.ndarray, lower: np.ndarray, upper: np.ndarray, weights: 
         blocks.append(scipy.sparse.hstack([-difference, left, -slack, right]))
         rows.extend([size, size])
         column += size
+    # P - e0 <= C and -P - e0 <= -C.
+    centre = (original - offset) / scale
+    cost[column:] = DEPARTURE_WEIGHT * min(w for w in weights if w > 0)
+    identity, departure = scipy.sparse.identity(n, format="csr"), scipy.sparse.identity(n, format="csr")
+    middle = scipy.sparse.csr_matrix((n, column - n))
+    blocks.append(scipy.sparse.hstack([identity, middle, -departure]))
+    blocks.append(scipy.sparse.hstack([-identity, middle, -departure]))
     a_ub = scipy.sparse.vstack(blocks, format="csr")
+    b_ub = np.r_[np.zeros(a_ub.shape[0] - 2 * n), centre, -centre]
     bounds = np.column_stack([np.r_[lo, np.zeros(n_vars - n)], np.r_[hi, np.full(n_vars - n, np.inf)]])
-    result = scipy.optimize.linprog(cost, A_ub=a_ub, b_ub=np.zeros(a_ub.shape[0]), bounds=bounds, method="highs")
+    result = scipy.optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
     if result.status != 0 or result.x is None:
         return np.clip(original, lower, upper)  # cannot happen with feasible box bounds; stay safe
     return np.clip(result.x[:n] * scale + offset, lower, upper)

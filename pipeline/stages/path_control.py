@@ -51,15 +51,15 @@ class Smoothness:
         text = text.strip()
         try:
             if "=" not in text:
-                value = float(text)
-                return cls(value, value, value)
-            values = {}
-            for part in text.split(","):
-                key, _, value = part.partition("=")
-                values[_AXIS_KEYS[key.strip().lower()]] = float(value)
-            return cls(**values)
+                values = dict.fromkeys(AXES, float(text))
+            else:
+                values = {}
+                for part in text.split(","):
+                    key, _, value = part.partition("=")
+                    values[_AXIS_KEYS[key.strip().lower()]] = float(value)
         except (KeyError, ValueError):
             raise ConfigError(f"smoothness {text!r}: expected a number 0-100 or t=S,r=S,z=S") from None
+        return cls(**values)
 
     def radius(self, axis: str) -> int:
         """Eq. 18's k for an axis: 30 at strength 50, 0 at 0, 120 at 100 (quadratic: fine control where it is

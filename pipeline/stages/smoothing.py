@@ -97,10 +97,12 @@ class SmoothingConfig:
 class SmoothingResult:
     orig_from_stab: np.ndarray  # (N, 3, 3): S_t
     segment_starts: tuple[int, ...]  # frames where a smoothing segment begins (0 and every scene cut)
-    # Camera trajectories for plots (frame centre displacement x, y in px and angle in degrees,
-    # relative to the segment's first frame): original vs smoothed. Shape (N, 3).
+    # Camera trajectories for plots (frame centre displacement x, y in px, angle in degrees and zoom in % of the
+    # shot's first frame's scale, relative to the shot's first frame): original vs smoothed. Shape (N, 4).
     original_trajectory: np.ndarray
     smoothed_trajectory: np.ndarray
+    settings: tuple[str, ...] = ()  # the path settings used, in the command line's words (path_control segments)
+    setting_of: np.ndarray | None = None  # (N,) index into settings of the one each frame was planned with
 
     @property
     def stab_from_orig(self) -> np.ndarray:
@@ -139,7 +141,9 @@ def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig
     for first, last in zip(segment_starts, segment_end):
         orig_from_stab[first:last + 1] = _plan_shot(curr_from_prev, prev_from_curr, first, last, settings,
                                                     setting_of, blend, width, height)
-    return _finish(curr_from_prev, orig_from_stab, segment_starts, config, width, height)
+    result = _finish(curr_from_prev, orig_from_stab, segment_starts, config, width, height)
+    labels = (config.label(), *(segment.label() for segment in config.segments))
+    return dataclasses.replace(result, settings=labels, setting_of=setting_of)
 
 
 def _plan_shot(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: int, last: int,
@@ -216,9 +220,13 @@ def _gaussian(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: int
 def path_warnings(result: SmoothingResult, config: SmoothingConfig) -> list[str]:
     """What a user should hear about the planned path: a tripod that had to move (the input camera went further
     than the held view can reach), as frame ranges."""
-    if config.path != "tripod":
+    tripods = [config.path == "tripod", *(segment.path == "tripod" for segment in config.segments)]
+    if not any(tripods):
         return []
-    moving = np.flatnonzero(np.abs(np.diff(result.smoothed_trajectory, axis=0)).max(axis=1) > TRIPOD_STILL)
+    steps = np.abs(np.diff(result.smoothed_trajectory[:, :3], axis=0)).max(axis=1)
+    of = result.setting_of if result.setting_of is not None else np.zeros(len(steps) + 1, np.int64)
+    held = np.asarray(tripods)[of[1:]]
+    moving = np.flatnonzero((steps > TRIPOD_STILL) & held)
     if moving.size == 0:
         return []
     starts = set(result.segment_starts)
@@ -264,20 +272,25 @@ def _l1_path(curr_from_prev: np.ndarray, first: int, last: int, config: l1_path.
 
 def trajectories(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_starts: Sequence[int],
                  width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """Accumulated camera paths for display only (x, y, angle per frame), original and smoothed.
+    """Accumulated camera paths for display only (x, y, angle, zoom per frame), original and smoothed.
 
     The original path of frame t is first_from_t (its pixels in the segment's first frame); the smoothed
     path is first_from_t @ S_t. Accumulation is fine here: these curves are never fed back.
     """
     n_frames = len(curr_from_prev)
     starts = set(segment_starts)
-    original = np.zeros((n_frames, 3))
-    smoothed = np.zeros((n_frames, 3))
+    original = np.zeros((n_frames, 4))
+    smoothed = np.zeros((n_frames, 4))
     first_from_t = geometry.IDENTITY.copy()
     for t in range(n_frames):
         if t not in starts:
             first_from_t = first_from_t @ np.linalg.inv(curr_from_prev[t])
             first_from_t /= first_from_t[2, 2]
-        original[t] = geometry.decompose(first_from_t, width, height)[:3]
-        smoothed[t] = geometry.decompose(first_from_t @ orig_from_stab[t], width, height)[:3]
+        original[t] = _trajectory_point(first_from_t, width, height)
+        smoothed[t] = _trajectory_point(first_from_t @ orig_from_stab[t], width, height)
     return original, smoothed
+
+
+def _trajectory_point(first_from_t: np.ndarray, width: int, height: int) -> tuple[float, float, float, float]:
+    dx, dy, angle, scale = geometry.decompose(first_from_t, width, height)
+    return dx, dy, angle, 100.0 * (scale - 1.0)
