@@ -234,6 +234,30 @@ def test_round_trip_keeps_count_rate_size_timestamps_and_pixels(tmp_path):
     assert temp_leftovers(tmp_path) == []
 
 
+def _slices_per_frame(path: Path) -> list[int]:
+    """Coded slices (NAL types 1 and 5) in each H.264 packet of an MP4 (4-byte length-prefixed NAL units)."""
+    counts = []
+    with av.open(str(path)) as container:
+        for packet in container.demux(video=0):
+            data, at, slices = bytes(packet), 0, 0
+            while at + 4 <= len(data):
+                size = int.from_bytes(data[at:at + 4], "big")
+                slices += (data[at + 4] & 0x1F) in (1, 5) if size else 0
+                at += 4 + size
+            if data:
+                counts.append(slices)
+    return counts
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="x264 runs one thread on one core: one slice either way")
+def test_h264_is_encoded_on_frame_threads_one_slice_a_frame(tmp_path):
+    """PyAV's default (slice threads) makes x264 cut every frame into one slice per thread; frame threads, as
+    the ffmpeg command line uses, keep one slice a frame: the same CPU, less wall time, no slice-edge cost."""
+    source = make_video(tmp_path / "in.mp4", width=640, height=360, frames=8)  # tiny frames get one slice anyway
+    copy_through(source, tmp_path / "out.mp4", encoding=Encoding(codec="h264", crf=18))
+    assert set(_slices_per_frame(tmp_path / "out.mp4")) == {1}
+
+
 def test_variable_frame_rate_timing_is_kept(tmp_path):
     pts_ms = [0, 40, 80, 200, 240, 250, 400, 433, 500, 700]
     source = make_video(tmp_path / "in.mp4", pts=pts_ms, time_base=Fraction(1, 1000))
