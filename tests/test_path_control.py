@@ -252,3 +252,17 @@ def test_cli_path_control_options_end_to_end(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0], (bad, err)
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_a_tripod_holds_the_median_view_not_a_corner_of_its_margins():
+    """Among the equally still paths (any constant within every frame's margin), the L1 program's tie-break picks
+    the one nearest the input: on a still scene, the held view is the input's median view, within 1 px / 0.05
+    degrees (a corner of the margins would be up to 10 % of the frame away, and leave that much more to fill)."""
+    video = generate(SyntheticConfig(n_frames=90, moving_object=False, blurred_frames=(), pan_px_per_frame=0.0,
+                                     seed=4))
+    result = smoothing.smooth(video.curr_from_prev, smoothing.SmoothingConfig(path="tripod"), width=W, height=H)
+    held = result.smoothed_trajectory
+    assert np.abs(held - held[0]).max() < 1e-6  # still
+    median = np.median(result.original_trajectory, axis=0)
+    assert np.abs(held[0, :2] - median[:2]).max() < 1.0 and abs(held[0, 2] - median[2]) < 0.05
+    assert np.ptp(result.original_trajectory[:, :2], axis=0).min() > 20  # the input does move about it
