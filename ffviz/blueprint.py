@@ -24,7 +24,9 @@ TAB_NOTES = {
         "`stage`); *about* summarises the run and lists its warnings."),
     "motion": ("**Motion estimation** (thesis ch. 3): corners tracked from frame t-1 to t (green inliers, red "
                "outliers), a robust fit of `curr_from_prev`; its shift, rotation and zoom per frame, inliers and "
-               "the fit's residual."),
+               "the fit's residual. Orange: tracks of another motion (a moving object) the camera did not follow; "
+               "violet: where `--ignore` / `--ignore-mask` kept features out; cyan (`--rolling-shutter`): how far each "
+               "band of rows was seen from the middle row's view (5x), and the bottom band's shift against the top's."),
     "smoothing": ("**Motion smoothing** (eq. 18, `S_t = sum G(i-t) T_t^i`) and **warping** (eq. 19, "
                   "`I'_t(p) = I_t(S_t p)`): the camera path original against smoothed; the stabilized frame and, "
                   "in red, the area no input pixel covers (the crop window in yellow with `--mode crop`)."),
@@ -104,6 +106,8 @@ def motion_tab() -> rrb.Container:
                     rrb.TimeSeriesView(name="inliers", origin=f"/{ent.MOTION_INLIERS}"),
                     rrb.TimeSeriesView(name="inlier ratio", origin=f"/{ent.MOTION_INLIER_RATIO}"),
                     rrb.TimeSeriesView(name="residual (px)", origin=f"/{ent.MOTION_RESIDUAL}"),
+                    rrb.TimeSeriesView(name="rolling shutter: bottom - top (px)",
+                                       origin=f"/{ent.ROLLING_SHUTTER_SKEW}"),
                 ),
             ),
         ),

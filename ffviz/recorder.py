@@ -31,6 +31,7 @@ from ffviz.blueprint import default_blueprint
 from pipeline import geometry
 from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
 from pipeline.stages.motion import MotionEstimate
+from pipeline.stages.rolling_shutter import Correction
 from pipeline.results import FrameResult, PathPlan, Stamp
 from pipeline.runtime.colour import ColourDescription, display_rgb
 from pipeline.runtime.video_io import Frame
@@ -58,6 +59,11 @@ ACCEPTED_LEGEND = [(0, "known", (0, 0, 0, 0)), (1, "missing, rejected by the mos
                    (2, "missing, accepted by the mosaic", (40, 200, 90, 160))]
 FALLBACK_LEGEND = [(0, "other", (0, 0, 0, 0)), (1, "fallback", (255, 200, 0, 200))]
 CROP_COLOUR = (255, 220, 0)
+FOREGROUND_COLOUR = (255, 150, 0)  # tracks of the motion not taken for the camera's
+IGNORED_COLOUR = (200, 120, 255)  # outline of --ignore / --ignore-mask
+ROLLING_SHUTTER_COLOUR = (0, 220, 255)
+ROLLING_SHUTTER_GAIN = 5.0  # the bands' arrows are drawn this many times their length (shifts are a few px)
+ROLLING_SHUTTER_BANDS = 8
 LABEL_COLOUR = (255, 255, 255, 255)  # stage labels: opaque white reads as dark text on a light tag (checked headless)
 VARIANCE_RANGE = visual.VARIANCE_RANGE
 ARRIVAL_RANGE = visual.ARRIVAL_RANGE
@@ -94,14 +100,16 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "curr_points": (f"{ent.MOTION_FEATURES}/points", f"{ent.MOTION_FEATURES}/arrows"),
         "inliers": (f"{ent.MOTION_FEATURES}/points",),  # as the points' colours
         "alternative": NotRecorded("the second motion among the outliers; its effect is curr_from_prev"),
-        "alternative_prev_points": NotRecorded("tracks of the second motion, not drawn yet"),
-        "alternative_curr_points": NotRecorded("tracks of the second motion, not drawn yet"),
-        "chose_alternative": NotRecorded("which motion was the background; its effect is curr_from_prev"),
+        "alternative_prev_points": NotRecorded("where the other motion's tracks start; their ends are drawn"),
+        "alternative_curr_points": (ent.MOTION_FOREGROUND,),
+        "chose_alternative": (ent.LOG,),
+        "ignored": (ent.MOTION_IGNORED,),
     },
     "PathPlan": {  # on_path, once
         "motion": Nested("MotionPass"),
         "smoothing": Nested("SmoothingResult"),
         "orig_from_out": NotRecorded("equal to the smoothed path but for the crop, both recorded"),
+        "rolling_shutter": Nested("Correction"),
         "rolling_shutter": Nested("Correction"),
         "crop": Nested("CropWindow"),
         "adaptive_crop": Nested("AdaptiveCrop"),
@@ -109,6 +117,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
     },
     "MotionPass": {
         "curr_from_prev": NotRecorded("recorded frame by frame from on_motion"),
+        "tracks": NotRecorded("the inlier tracks, recorded frame by frame from on_motion"),
         "tracks": NotRecorded("the inlier tracks, recorded frame by frame from on_motion"),
         "statuses": NotRecorded("recorded frame by frame from on_motion"),
         "times_s": (ent.VIDEO_TIME_TIMELINE,),
@@ -131,13 +140,16 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
     "CropWindow": {"x0": (ent.CROP_WINDOW,), "y0": (ent.CROP_WINDOW,),
                    "scale": (ent.CROP_WINDOW, ent.CROP_SCALE, ent.META)},
     "Correction": {  # --rolling-shutter
-        "readout": NotRecorded("not drawn yet"),
+        "readout": (ent.LOG,),
         "rows": Nested("RowMotion"),
-        "curr_from_prev": NotRecorded("not drawn yet"),
+        "curr_from_prev": NotRecorded("the motions between corrected views; the trajectories are their sums"),
     },
     "RowMotion": {
-        "readout": NotRecorded("not drawn yet"), "height": NotRecorded("the frame's size"),
-        "velocity": NotRecorded("not drawn yet"), "acceleration": NotRecorded("not drawn yet"),
+        "readout": (ent.ROLLING_SHUTTER_BANDS, ent.ROLLING_SHUTTER_SKEW + "/dx", ent.ROLLING_SHUTTER_SKEW + "/dy"),
+        "height": NotRecorded("the frame's size"),
+        "velocity": (ent.ROLLING_SHUTTER_BANDS, ent.ROLLING_SHUTTER_SKEW + "/dx", ent.ROLLING_SHUTTER_SKEW + "/dy"),
+        "acceleration": (ent.ROLLING_SHUTTER_BANDS, ent.ROLLING_SHUTTER_SKEW + "/dx",
+                         ent.ROLLING_SHUTTER_SKEW + "/dy"),
     },
     "FrameResult": {  # on_frame, every frame of pass 2
         "stamp": Nested("Stamp"),
@@ -358,6 +370,8 @@ class RerunRecorder:
         self._times: dict[int, float] = {}
         self._size = (0, 0)
         self._closed = False
+        self._foreground_shown = False
+        self._ignored_drawn: bytes | None = None  # the ignore mask last outlined (redrawn only when it changes)
         self._trace_requested = None if trace_frames is None else tuple(sorted({int(t) for t in trace_frames}))
         self.traced: tuple[int, ...] = self._trace_requested or ()  # default ones chosen when the path is known
         self._blueprint_sent = False
@@ -551,9 +565,71 @@ class RerunRecorder:
             self.rec.log(f"{ent.MOTION_FEATURES}/arrows", rr.Arrows2D(
                 origins=estimate.prev_points[::step], vectors=(estimate.curr_points - estimate.prev_points)[::step],
                 colors=colours[::step]))
+        self._on_foreground(estimate)
+        self._on_ignored(estimate.ignored)
+
+    def _on_foreground(self, estimate: MotionEstimate) -> None:
+        """The other motion's tracks (a moving object's, or the RANSAC winner's when that was the object), orange
+        over the green and red ones (full level), and a log line where the camera took the other motion."""
+        if estimate.chose_alternative:
+            self.rec.log(ent.LOG, rr.TextLog("the tracks most agree on move with a foreground object: the camera "
+                                             "follows the other motion (orange: the object's)",
+                                             level=rr.TextLogLevel.INFO))
+        if self.level != "full":
+            return
+        points = estimate.alternative_curr_points
+        if points is not None and len(points):
+            self.rec.log(ent.MOTION_FOREGROUND, rr.Points2D(points, colors=FOREGROUND_COLOUR, radii=2.5))
+            self._foreground_shown = True
+        elif self._foreground_shown:
+            self.rec.log(ent.MOTION_FOREGROUND, rr.Clear(recursive=False))
+            self._foreground_shown = False
+
+    def _on_ignored(self, ignored: np.ndarray | None) -> None:
+        """Outline of where features were not used (--ignore boxes, --ignore-mask), logged when it changes."""
+        key = None if ignored is None or not ignored.any() else np.packbits(ignored).tobytes()
+        if key == self._ignored_drawn:
+            return
+        self._ignored_drawn = key
+        if key is None:
+            self.rec.log(ent.MOTION_IGNORED, rr.Clear(recursive=False))
+            return
+        mask = cv2.resize(ignored.view(np.uint8), self._size, interpolation=cv2.INTER_NEAREST)
+        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        strips = [np.vstack([c.reshape(-1, 2), c.reshape(-1, 2)[:1]]).astype(np.float32) for c in contours]
+        self.rec.log(ent.MOTION_IGNORED, rr.LineStrips2D(strips, colors=IGNORED_COLOUR, radii=1.5))
+
+    def _on_rolling_shutter(self, correction: Correction) -> None:
+        """--rolling-shutter: the readout time (log), each frame's bottom band shifted against its top band (series)
+        and, at full level, arrows from every band's middle-row position to where its rows saw it (x5)."""
+        width, height = self._size
+        self.rec.log(ent.LOG, rr.TextLog(f"rolling shutter: readout {correction.readout:.2f} of the frame interval",
+                                         level=rr.TextLogLevel.INFO), static=True)
+        frames = np.arange(len(correction.rows))
+        xs = np.linspace(0.1, 0.9, 5) * (width - 1)
+        skew = []
+        for t, rows in zip(frames, correction.rows):
+            centres, bands = rows.bands(ROLLING_SHUTTER_BANDS)
+            origins = np.array([(x, y) for y in centres for x in xs])
+            moved = np.concatenate([geometry.apply(band, [(x, y) for x in xs]) for band, y in zip(bands, centres)])
+            skew.append(moved[-3] - moved[2] - (origins[-3] - origins[2]))  # centre column, last band - first
+            if self.level == "full":
+                self._set_time(Stamp(int(t), self._times.get(int(t), 0.0)))
+                self.rec.log(ent.ROLLING_SHUTTER_BANDS, rr.Arrows2D(
+                    origins=origins, vectors=(moved - origins) * ROLLING_SHUTTER_GAIN, colors=ROLLING_SHUTTER_COLOUR))
+        times = np.array([self._times.get(int(t), 0.0) for t in frames])
+        indexes = [rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
+                   rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)]
+        for column, (axis, colour) in enumerate((("dx", (0, 220, 255)), ("dy", (255, 110, 200)))):
+            entity = f"{ent.ROLLING_SHUTTER_SKEW}/{axis}"
+            self.rec.log(entity, rr.SeriesLines(names=f"bottom - top, {axis[1]} (px)", colors=[colour], widths=2.0),
+                         static=True)
+            self.rec.send_columns(entity, indexes=indexes, columns=rr.Scalars.columns(scalars=np.array(skew)[:, column]))
 
     def _on_path(self, plan: PathPlan) -> None:
         self._on_smoothing(plan.smoothing)
+        if plan.rolling_shutter is not None:
+            self._on_rolling_shutter(plan.rolling_shutter)
         if plan.crop is not None:
             self._on_crop(plan.crop)
             self._on_crop_scales(np.full(len(plan.orig_from_out), plan.crop.scale))

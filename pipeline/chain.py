@@ -21,8 +21,7 @@ from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.source import FrameSource, one_pass
 from pipeline.runtime.window import Windowed, sliding_window
-from pipeline.stages import rolling_shutter
-from pipeline.stages import adaptive_crop, completion, deblur, neighbours, smoothing, warping
+from pipeline.stages import adaptive_crop, completion, deblur, neighbours, rolling_shutter, smoothing, warping
 
 import numpy as np
 
@@ -40,6 +39,13 @@ def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, heig
                                           height, config.motion.model)
     corrected = dataclasses.replace(motion_pass, curr_from_prev=correction.curr_from_prev)
     plan = _plan_views(corrected, config, width, height)
+    if plan.crop is not None:  # the window must also avoid what the rows' views leave uncovered
+        valid = np.stack([rows.valid_box(width) for rows in correction.rows])
+        crop = warping.largest_crop(plan.smoothing.orig_from_stab, width, height, valid=valid)
+        stab = plan.smoothing.orig_from_stab
+        warnings = plan.warnings + ([NO_CROP_WARNING] if crop is None else [])
+        plan = dataclasses.replace(plan, crop=crop, orig_from_out=stab if crop is None else stab @ crop.stab_from_out,
+                                   warnings=warnings)
     if plan.adaptive_crop is not None:  # the same for each frame's window
         valid = np.stack([rows.valid_box(width) for rows in correction.rows])
         adaptive = adaptive_crop.adaptive_crop(plan.smoothing.orig_from_stab, width, height,

@@ -160,3 +160,15 @@ def test_cli_refuses_a_bad_readout_in_one_line(tmp_path):
     assert run.returncode != 0 and "Traceback" not in run.stderr
     assert "--rolling-shutter" in run.stderr and len(run.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out.mp4").exists()
+
+
+def test_crop_window_avoids_what_the_row_views_leave_uncovered():
+    video = clip(0.9, n_frames=30)
+    keep = _Keep()
+    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="crop", rolling_shutter=0.9),
+                     observer=keep, workers=1)
+    assert keep.plan.crop is not None
+    # No output pixel samples outside its input frame (the border ring of black a plain crop would show).
+    for t in range(video.n_frames):
+        map_x, map_y = rolling_shutter.orig_maps(keep.plan.orig_from_out[t], keep.plan.rolling_shutter.rows[t], (W, H))
+        assert map_x.min() >= -0.5 and map_x.max() <= W - 0.5 and map_y.min() >= -0.5 and map_y.max() <= H - 0.5, t

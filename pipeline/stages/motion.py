@@ -116,6 +116,7 @@ class MotionEstimate:
     alternative_prev_points: np.ndarray | None = None  # (M, 2) its supporting tracks, full-resolution px
     alternative_curr_points: np.ndarray | None = None
     chose_alternative: bool = False  # the RANSAC winner was a moving object: the alternative was taken
+    ignored: np.ndarray | None = None  # bool, working size: where prev's features were not used (--ignore*)
 
     @property
     def inlier_ratio(self) -> float:
@@ -177,6 +178,7 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
         alternative=None if work.alternative is None else geometry.rescale_transform(work.alternative, curr.scale),
         alternative_prev_points=None if work.alternative is None else work.alternative_points[0] * to_full,
         alternative_curr_points=None if work.alternative is None else work.alternative_points[1] * to_full,
+        ignored=prev.ignore,
     )
     if failure is None:
         return MotionEstimate(curr_from_prev=full_transform, status="ok", **tracks)

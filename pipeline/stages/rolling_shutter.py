@@ -85,6 +85,16 @@ class RowMotion:
         det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] * m[:, 1, 0]
         return np.stack([(m[:, 1, 1] * dx - m[:, 0, 1] * dy) / det, (m[:, 0, 0] * dy - m[:, 1, 0] * dx) / det], axis=1)
 
+    def valid_box(self, width: int, samples: int = 9) -> np.ndarray:
+        """(4, 2) corners of an axis-aligned box, in the middle row's view, that the input frame covers (its
+        border, moved row by row into that view, sampled at ``samples`` points a side, lies outside the box)."""
+        ramp_x, ramp_y = np.linspace(0.0, width - 1.0, samples), np.linspace(0.0, self.height - 1.0, samples)
+        left = self.mid_points(np.stack([np.zeros(samples), ramp_y], axis=1))[:, 0].max()
+        right = self.mid_points(np.stack([np.full(samples, width - 1.0), ramp_y], axis=1))[:, 0].min()
+        top = self.mid_points(np.stack([ramp_x, np.zeros(samples)], axis=1))[:, 1].max()
+        bottom = self.mid_points(np.stack([ramp_x, np.full(samples, self.height - 1.0)], axis=1))[:, 1].min()
+        return np.array([[left, top], [right, top], [right, bottom], [left, bottom]])
+
     def input_points(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Input coordinates showing the middle-row-view points (x, y) (arrays of one shape): p = row_from_mid(p_y) q,
         solved for p_y by fixed-point iteration."""

@@ -107,12 +107,14 @@ class CropWindow:
         return self.scale**2
 
 
-def largest_crop(orig_from_stab: np.ndarray, width: int, height: int) -> CropWindow | None:
+def largest_crop(orig_from_stab: np.ndarray, width: int, height: int,
+                 valid: np.ndarray | None = None) -> CropWindow | None:
     """The largest window of the input's aspect ratio valid in every stabilized frame.
 
     Each frame's valid region is the original frame mapped into stabilized coordinates (a convex quad);
     the window's four corners must lie inside all of them and inside the frame. That is a linear
     programme in (x0, y0, scale), maximising scale. None when no area is common to all frames.
+    ``valid``: (N, 4, 2) each frame's valid region in its own coordinates, a convex quad (default: the frame).
     """
     from scipy.optimize import linprog  # here, not at the top: importing scipy.optimize takes ~0.5 s
 
@@ -132,8 +134,8 @@ def largest_crop(orig_from_stab: np.ndarray, width: int, height: int) -> CropWin
                 bounds.append(float(normal @ a))
 
     inside_convex(corners)
-    for s_t in np.asarray(orig_from_stab):
-        inside_convex(geometry.apply(np.linalg.inv(s_t), corners))
+    for t, s_t in enumerate(np.asarray(orig_from_stab)):
+        inside_convex(geometry.apply(np.linalg.inv(s_t), corners if valid is None else valid[t]))
 
     result = linprog(c=[0.0, 0.0, -1.0], A_ub=np.array(rows), b_ub=np.array(bounds),
                      bounds=[(None, None), (None, None), (0.0, 1.0)], method="highs")

@@ -1,0 +1,95 @@
+"""The debugger's view of robust motion, read back from a recording: the other motion's (foreground) tracks, the
+ignore mask's outline, and the rolling-shutter correction's per-band motion, each against the pipeline's values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ffviz import entities as ent
+from ffviz.recorder import ROLLING_SHUTTER_BANDS, ROLLING_SHUTTER_GAIN, RerunRecorder
+from ffviz.rrd import Recording
+from pipeline.evaluation import synthetic
+from pipeline.runtime.observer import Observers, StageCollector
+from pipeline.stabilize import StabilizeConfig, stabilize
+from pipeline.stages import motion
+
+N_FRAMES = 16
+BOX = motion.IgnoreRegion(0, 0, 80, 60, start_s=0.2, end_s=0.35)  # frames 6-10 at 30 fps
+
+
+def rows_at(recording: Recording, entity: str, column: str) -> dict[int, list]:
+    """frame -> the last value of ``column`` logged at it (None for a Clear)."""
+    out: dict[int, list] = {}
+    for batch in recording.batches.get(entity, []):
+        names = batch.schema.names
+        if ent.FRAME_TIMELINE not in names:
+            continue
+        values = batch.column(column).to_pylist() if column in names else [None] * batch.num_rows
+        for frame, value in zip(batch.column(ent.FRAME_TIMELINE).to_pylist(), values):
+            out[frame] = value
+    return out
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """A 320x180 clip with a rolling shutter (readout 0.8) and a figure filling most of the frame, recorded at full
+    level with --ignore BOX and --rolling-shutter 0.8."""
+    video = synthetic.generate(synthetic.SyntheticConfig(
+        width=320, height=180, n_frames=N_FRAMES, seed=2, object_kind="person", person_size=(0.9, 1.0),
+        object_sweep=0.15, blurred_frames=(), image="astronaut", readout=0.8))
+    folder = tmp_path_factory.mktemp("robust")
+    clip, rrd = folder / "clip.mp4", folder / "run.rrd"
+    synthetic.write_video(video, clip)
+    collector = StageCollector("motion", "path")
+    config = StabilizeConfig(mode="none", rolling_shutter=0.8, motion=motion.MotionConfig(ignore=(BOX,)))
+    stabilize(clip, None, config, observer=Observers(RerunRecorder(rrd, level="full", jpeg_quality=None), collector))
+    return Recording.load(rrd), collector
+
+
+def test_foreground_tracks_are_the_other_motions(run):
+    recording, collector = run
+    logged = rows_at(recording, ent.MOTION_FOREGROUND, "Points2D:positions")
+    estimates = {stamp.index: e for stamp, e in collector.results["motion"]}
+    with_other = [t for t, e in estimates.items() if e.alternative_curr_points is not None]
+    assert with_other, "the figure gives no second motion: the test shows nothing"
+    for t in with_other:
+        assert np.allclose(np.array(logged[t]), estimates[t].alternative_curr_points, atol=1e-3)
+    # A frame without another motion after one with: cleared, so stale points do not stay on screen.
+    for t in range(1, N_FRAMES):
+        if estimates[t].alternative_curr_points is None and estimates[t - 1].alternative_curr_points is not None:
+            assert logged.get(t, "missing") is None
+
+
+def test_ignore_box_is_outlined_while_active(run):
+    recording, _ = run
+    logged = rows_at(recording, ent.MOTION_IGNORED, "LineStrips2D:strips")
+    shown = sorted(t for t, v in logged.items() if v is not None)
+    assert shown and min(shown) == 7  # drawn from the first pair whose earlier frame (6) it covers
+    strip = np.array(logged[shown[0]][0])
+    # The outline lies on the box's border (full-resolution px; the motion pass works at full size here).
+    assert strip[:, 0].min() == pytest.approx(BOX.x, abs=1) and strip[:, 0].max() == pytest.approx(BOX.x + BOX.width - 1, abs=1)
+    assert strip[:, 1].min() == pytest.approx(BOX.y, abs=1) and strip[:, 1].max() == pytest.approx(BOX.y + BOX.height - 1, abs=1)
+    cleared = [t for t, v in logged.items() if v is None]
+    assert cleared and min(cleared) == 12  # and cleared after the last such pair (10, 11)
+
+
+def test_rolling_shutter_bands_are_the_corrections(run):
+    recording, collector = run
+    (_, plan), = collector.results["path"]
+    correction = plan.rolling_shutter
+    assert correction is not None and correction.readout == 0.8
+    arrows = rows_at(recording, ent.ROLLING_SHUTTER_BANDS, "Arrows2D:vectors")
+    origins = rows_at(recording, ent.ROLLING_SHUTTER_BANDS, "Arrows2D:origins")
+    assert sorted(arrows) == list(range(N_FRAMES))
+    t = N_FRAMES // 2
+    centres, bands = correction.rows[t].bands(ROLLING_SHUTTER_BANDS)
+    start = np.array(origins[t])
+    moved = np.einsum("nij,nj->ni", np.repeat(bands, len(start) // len(bands), axis=0),
+                      np.c_[start, np.ones(len(start))])[:, :2]
+    assert np.allclose(np.array(arrows[t]), (moved - start) * ROLLING_SHUTTER_GAIN, atol=1e-3)
+    assert np.allclose(np.unique(start[:, 1]), centres, atol=1e-3)
+    # The skew series: one value a frame, and the clip's shake does bend the frames.
+    frames, dx = recording.scalars(f"{ent.ROLLING_SHUTTER_SKEW}/dx")
+    assert frames.tolist() == list(range(N_FRAMES)) and np.abs(dx).max() > 0.5
+    assert any("readout 0.80" in text for text in recording.texts(ent.LOG, "TextLog:text"))
