@@ -189,6 +189,14 @@ class _Axis:
         return int(round(self.y0 + (v - lo) / (hi - lo) * (self.y1 - self.y0)))
 
 
+def _fitted(label: str, characters: int) -> str:
+    """``label`` cut in the middle (the end keeps a file's extension) to at most ``characters``."""
+    if len(label) <= characters:
+        return label
+    keep = max(characters - 1, 2)
+    return label[:(keep + 1) // 2] + "\u2026" + label[len(label) - keep // 2:]
+
+
 def _colour(rgb: tuple[int, int, int]) -> tuple[float, float, float]:
     return tuple(c / 255.0 for c in rgb)
 
@@ -206,10 +214,15 @@ def _background(lay: _Layout, labels: Sequence[str], plotted: Sequence[np.ndarra
     fig = Figure(figsize=(lay.width / dpi, lay.height / dpi), dpi=dpi, facecolor=_colour(BACKGROUND))
     canvas = FigureCanvasAgg(fig)
     points = lay.font_px * 72.0 / dpi  # px to points
+    renderer = canvas.get_renderer()
     for i, label in enumerate(labels):
-        fig.text((lay.panel_x[i] + lay.panel_w[i] / 2.0) / lay.width, 1.0 - lay.header / 2.0 / lay.height, label,
-                 ha="center", va="center", fontsize=points, color=_colour(PANEL_COLOURS[i % len(PANEL_COLOURS)]),
-                 fontweight="bold", clip_on=True)
+        text = fig.text((lay.panel_x[i] + lay.panel_w[i] / 2.0) / lay.width, 1.0 - lay.header / 2.0 / lay.height,
+                        label, ha="center", va="center", fontsize=points, fontweight="bold",
+                        color=_colour(PANEL_COLOURS[i % len(PANEL_COLOURS)]))
+        room, characters = lay.panel_w[i] - lay.font_px, len(label)
+        while text.get_window_extent(renderer).width > room and characters > 3:  # cut to fit its own video
+            characters -= 1
+            text.set_text(_fitted(label, characters))
     small = points * 0.8
     column = lay.width / len(PLOTS)
     left, right = 4.2 * lay.font_px, 0.6 * lay.font_px  # room for tick labels

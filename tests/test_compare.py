@@ -236,3 +236,42 @@ def test_preview_and_compare_options_are_checked_before_the_run(clip, tmp_path, 
         err = capsys.readouterr().err.strip()
         assert words in err and "\n" not in err, err
         assert not out.exists()
+
+
+def test_cursor_dots_land_on_the_path_lines_matplotlib_drew():
+    """The per-frame dots are placed by the plots' data-to-pixel map: on the drawn line, not 8 px off it (the
+    vertical plot is flipped so that up is up, which the map must follow)."""
+    t = np.arange(60) / 30
+    paths = [np.stack([40 * np.sin(t * 2), 10 * np.cos(t * 3), 0.5 * np.sin(t)], 1),
+             np.stack([30 * t, -25 * t, 0.4 * t - 0.3], 1)]
+    lay = cmp.layout([(W, H), (W, H)], H)
+    background, axes = cmp._background(lay, ["a", "b"], paths, [t, t], 2.0)
+    for ax, (_, column) in zip(axes, cmp.PLOTS):
+        for i, path in enumerate(paths):
+            for k in (5, 30, 55):
+                x, y = ax.px(t[k]), ax.py(path[k, column])
+
+                def distance(row: int) -> int:  # to the video's colour, nearest pixel of a 3x3 patch
+                    patch = background[row - 1:row + 2, x - 1:x + 2].astype(int)
+                    return int(np.abs(patch - cmp.PANEL_COLOURS[i]).sum(axis=2).min())
+
+                # Measured: 0-15 on the line, 190 or more 8 px above or below it.
+                assert distance(y) < 40 and distance(y - 8) > 120 and distance(y + 8) > 120, (column, i, k)
+    frame = video_io.Frame(index=30, pts=30, time_s=1.0, rgb=np.zeros((H, W, 3), np.uint8))
+    drawn = cmp.compose(background, lay, axes, 1.0, [frame, frame], paths)
+    for ax, (_, column) in zip(axes, cmp.PLOTS):
+        x = ax.px(1.0)
+        assert (drawn[int(ax.y1) + 2:int(ax.y0) - 2, x] > 200).all(axis=1).mean() > 0.5  # the white cursor
+        for i, path in enumerate(paths):
+            assert np.abs(drawn[ax.py(path[30, column]), x].astype(int) - cmp.PANEL_COLOURS[i]).sum() < 40
+
+
+def test_a_long_label_is_shortened_to_its_own_video():
+    long = "a_very_long_name_for_the_original_video_taken_on_a_bicycle_through_the_old_town_at_dusk.mp4"
+    lay = cmp.layout([(W, H), (W, H)], H)
+    background, _ = cmp._background(lay, [long, "b"], [np.zeros((2, 3))] * 2, [np.array([0.0, 0.1])] * 2, 0.2)
+    header = background[:lay.header].astype(int)
+    red = np.abs(header - cmp.PANEL_COLOURS[0]).sum(axis=2) < 60
+    columns = np.flatnonzero(red.any(axis=0))
+    assert len(columns) and columns.max() < lay.panel_x[1] and columns.min() > 0  # drawn, within its video
+    assert cmp._fitted(long, 30).endswith("dusk.mp4") and len(cmp._fitted(long, 30)) == 30
