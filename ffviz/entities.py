@@ -40,7 +40,7 @@ FRAME_STREAMS = (INPUT_FRAME, "stabilized/frame", "completion/frame", OUTPUT_FRA
 # Float maps are stored as 16-bit PNG (EncodedDepthImage): stored = round(value / step) + 1, 0 = no value,
 # clipped at 65535. With --lossless they are float32 DepthImages, exact.
 MAP_STEPS = {"completion/mosaic/variance": 0.25,  # intensity^2 (0..255 scale); up to 16383.5
-             "completion/fmm/order": 1.0,  # visiting order; exact up to 65534 pixels filled from one neighbour
+             "completion/fmm/order": 4.0,  # visiting order, to 4 pixels (shown as a share); up to 262132 pixels
              "completion/fmm/arrival": 0.01}  # Fast Marching arrival time T, px; up to 655 px
 MAP_UNITS = {"completion/mosaic/variance": "intensity^2", "completion/fmm/order": "pixels filled before",
              "completion/fmm/arrival": "px"}

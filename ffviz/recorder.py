@@ -50,7 +50,7 @@ FILLED_BY_BASE = 100  # filled_by class of a local-warp pixel: FILLED_BY_BASE + 
 H264_OPTIONS = {"preset": "veryfast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
 KEYFRAME_INTERVAL = 30
 FRAME_SIZE_FIELD = "frame_size"  # (width, height) of a frame stream whose size is odd (ffviz.rrd crops to it)
-WEIGHTS_STEP = 4  # deblur/weights in the compact recording: multiples of 4/255 (--lossless: of 1/255)
+WEIGHTS_STEP = 8  # deblur/weights in the compact recording: multiples of 8/255 (--lossless: of 1/255)
 QUEUE_EVENTS = 48  # stage results waiting for the recorder's thread (~6 frames' worth): bounds the memory held
 _STOP = object()
 BATCHER = rr.ChunkBatcherConfig(flush_tick=2.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
@@ -787,7 +787,7 @@ class RerunRecorder:
         if weights is not None:
             # uint8 (255 = 1): a float32 map is 4x the bytes and does not compress; 1/255 is plenty to look at.
             quantised = np.clip(np.asarray(weights, np.float32) * ent.DEBLUR_WEIGHTS_SCALE + 0.5, 0, 255).astype(np.uint8)
-            if not self.lossless:  # steps of 1/64 (multiples of 4): half the PNG's bytes (measured on vplab_C)
+            if not self.lossless:  # steps of 1/32 (multiples of 8): a third of the PNG's bytes (docs/recording.md)
                 quantised = np.minimum(np.rint(quantised / WEIGHTS_STEP) * WEIGHTS_STEP, 255).astype(np.uint8)
             # 8-bit PNG: lossless for the stored values, ~20 kB instead of 230 kB at 640x360.
             self.rec.log(ent.DEBLUR_WEIGHTS, rr.EncodedDepthImage(

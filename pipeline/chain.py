@@ -20,7 +20,7 @@ from pipeline.config import StabilizeConfig
 from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.source import FrameSource, one_pass
-from pipeline.runtime.window import Windowed, sliding_window
+from pipeline.runtime.window import PerFrame, Windowed, sliding_window
 from pipeline.stages import adaptive_crop, completion, deblur, neighbours, rolling_shutter, smoothing, warping
 
 import numpy as np
@@ -98,6 +98,8 @@ class FrameChain:
         self.keep = keep_intermediates
         self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
         self.downscaled: neighbours.Downscaled | None = None  # frames at completion's flow resolution
+        # --rolling-shutter: completion and deblurring draw on frames corrected to their middle rows' views
+        self.middle_row_views = PerFrame(lambda item: rolling_shutter.middle_row_view(item[1], self.rows[item[0]]))
         self._downscaled_lock = threading.Lock()
 
     def _downscaled(self, shape: tuple[int, int], t: int) -> neighbours.Downscaled | None:
@@ -134,6 +136,11 @@ class FrameChain:
             stabilized = rolling_shutter.warp_frame(frame.rgb, self.orig_from_stab[t], rows)
         same_shot = {n.index: n.rgb for n in window.neighbours.values()
                      if n.index < len(self.shot_of) and self.shot_of[n.index] == self.shot_of[t]}
+        original = frame.rgb  # what completion and deblurring see of frame t (and same_shot of its neighbours)
+        if self.rows is not None and (config.completing or config.deblurring):
+            self.middle_row_views.forget_before(t - config.window_frames - RENDER_SLACK_FRAMES)
+            same_shot = {i: self.middle_row_views.get(i, (i, rgb)) for i, rgb in same_shot.items()}
+            original = self.middle_row_views.get(t, (t, frame.rgb))
         warped: list[neighbours.WarpedNeighbour] = []
         completed = None
         if config.completing:
@@ -141,7 +148,7 @@ class FrameChain:
             downscaled = self._downscaled(frame.rgb.shape[:2], t)
             warped = neighbours.warp_neighbours(near, t, self.curr_from_prev, self.orig_from_stab[t],
                                                 downscaled=downscaled)
-            itself = neighbours.warp_neighbours({t: frame.rgb}, t, self.curr_from_prev, self.orig_from_stab[t],
+            itself = neighbours.warp_neighbours({t: original}, t, self.curr_from_prev, self.orig_from_stab[t],
                                                 downscaled=downscaled)[0]
             lap("warp")
             completed = completion.complete(stabilized.frame, stabilized.missing, warped, config.completion,
@@ -160,7 +167,7 @@ class FrameChain:
         if config.deblurring:
             # Last, on the frame as it will be written: completion's warped neighbours are reused, completed pixels
             # are sharpened like the rest, missing pixels of --mode none stay missing (docs/deblurring.md).
-            deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: frame.rgb},
+            deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: original},
                                             self.curr_from_prev, self.orig_from_out[t], config.deblur,
                                             warped=warped, cache=self.energy_cache)
             lap("deblur")

@@ -256,6 +256,16 @@ def orig_maps(orig_from_out: np.ndarray, rows: RowMotion, size: tuple[int, int])
     return px.astype(np.float32), py.astype(np.float32)
 
 
+def middle_row_view(rgb: np.ndarray, rows: RowMotion) -> np.ndarray:
+    """The frame seen from its middle row's view (bilinear; the few border pixels no row covers repeat the edge):
+    what the neighbours of a frame are for completion and deblurring, which align whole frames."""
+    import cv2
+
+    height, width = rgb.shape[:2]
+    map_x, map_y = orig_maps(np.eye(3), rows, (width, height))
+    return cv2.remap(rgb, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
 def warp_frame(rgb: np.ndarray, orig_from_out: np.ndarray, rows: RowMotion | None,
                size: tuple[int, int] | None = None) -> warping.WarpResult:
     """``warping.warp_frame`` with each row's view undone first (bilinear; missing: pixels not fully covered)."""
