@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,8 +98,10 @@ def _reader(panel: Panel) -> video_io.VideoReader:
     return video_io.VideoReader(panel.path, start_s=panel.start_s, end_s=panel.end_s)
 
 
-def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progress=None) -> CameraPath:
-    """Pass 1 for one video: its motion frame to frame (pipeline.stages.motion) accumulated into a path."""
+def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progress=None,
+                stop: threading.Event | None = None) -> CameraPath:
+    """Pass 1 for one video: its motion frame to frame (pipeline.stages.motion) accumulated into a path.
+    ``stop``: set from another thread (Ctrl-C in the main one), it ends the pass at the next frame."""
     rows: list[tuple[float, float, float]] = []
     times: list[float] = []
     cuts = 0
@@ -109,6 +112,8 @@ def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progres
         info = reader.info
         first_time = None
         for frame in reader:
+            if stop is not None and stop.is_set():
+                raise _Stopped()
             prepared = motion.prepare(frame.rgb, config)
             if previous is not None and prepared.gray.shape == previous.gray.shape:
                 estimate = motion.estimate(previous, prepared, config)
@@ -126,6 +131,10 @@ def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progres
     if not rows:
         raise InputError(f"no decodable video frames in {panel.path}")
     return CameraPath(info, np.array(times), np.array(rows, np.float64).reshape(-1, 3), cuts)
+
+
+class _Stopped(Exception):
+    """Pass 1 of a video ended because another thread failed or was interrupted."""
 
 
 @dataclass(frozen=True)
@@ -332,9 +341,14 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
     video_io.check_output_path(output, panels[0].path, overwrite=overwrite)
 
     bar = progress("compare 1/2: camera paths", sum(info.frame_count for info in infos) or None)
+    stop = threading.Event()
     try:
         with ThreadPoolExecutor(max_workers=min(len(panels), 2)) as pool:
-            paths = list(pool.map(lambda panel: camera_path(panel, progress=bar), panels))
+            try:
+                paths = list(pool.map(lambda panel: camera_path(panel, progress=bar, stop=stop), panels))
+            except BaseException:  # Ctrl-C, SIGTERM or a video's error: the other threads stop at their next frame
+                stop.set()
+                raise
     finally:
         bar.close()
 
