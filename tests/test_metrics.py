@@ -443,3 +443,18 @@ def test_synthesized_labels_and_change_on_known_frames():
     ss, sn, rs, rn = metrics.synthesized_change(prev, labels, cur, labels, np.eye(3))
     assert sn == 60 * 8 and ss == pytest.approx(20 * sn)
     assert rn == 60 * (80 - 12) and rs == 0.0
+
+
+@pytest.mark.parametrize("shift_px, counted", [(4, False), (30, True)])
+def test_a_sliver_within_the_fits_tolerance_is_not_a_synthesized_area(shift_px, counted):
+    """A crop's window touches the warped input at its tightest frame, so an H fitted a few pixels off puts a sliver
+    of 'synthesized' pixels along the edge: 4 px at 320x180 (SIFT's RANSAC tolerance is 3 px) leaves two columns
+    beyond the 2 px seam, 360 pixels, over the 0.5 % a pair needs. It must not give a crop a flicker figure, while a
+    30 px strip (a real uncovered border) still does."""
+    shape = (180, 320)
+    rng = np.random.default_rng(1)
+    tally = metrics._FlickerTally(metrics.MetricsConfig())
+    for _ in range(3):
+        tally.add(rng.integers(0, 255, shape, dtype=np.uint8), _shift(shift_px, 0), np.eye(3))
+    ratio, synth, real = tally.result()
+    assert (tally.pairs == 2 and np.isfinite(ratio) and synth > 0) if counted else (tally.pairs == 0 and np.isnan(ratio))

@@ -314,8 +314,14 @@ class _FlickerTally:
         self.pairs = 0
 
     def add(self, grey: np.ndarray, H: np.ndarray | None, M: np.ndarray | None) -> None:
-        """Frame t: its grey output, H_t (input -> output, None if failed), M_t (output t-1 -> t, None if failed or t = 0)."""
+        """Frame t: its grey output, H_t (input -> output, None if failed), M_t (output t-1 -> t, None if failed or t = 0).
+
+        A frame whose synthesized area is only a sliver along the outline, no deeper than H's fitting tolerance
+        (``ransac_px`` at the detection scale), counts as having none: a crop's window touches the warped input at
+        its tightest frame, where an H off by a few pixels would otherwise read as a strip of synthesized pixels."""
         labels = None if H is None else synthesized_labels(H, grey.shape, self.config.seam_px)
+        if labels is not None and not self._synthesizes(H, grey.shape):
+            labels = np.where(labels == LABEL_SYNTH, LABEL_SEAM, labels).astype(np.uint8)
         if labels is not None and self.prev is not None and M is not None:
             ss, sn, rs, rn = synthesized_change(self.prev[0], self.prev[1], grey, labels, M)
             if sn >= self.config.min_synth_fraction * grey.size and rn > 0:
@@ -325,6 +331,12 @@ class _FlickerTally:
                 self.real_n += rn
                 self.pairs += 1
         self.prev = None if labels is None else (grey, labels)
+
+    def _synthesizes(self, H: np.ndarray, shape: tuple[int, int]) -> bool:
+        """Whether at least min_synth_fraction of the frame lies outside H's outline by more than its tolerance."""
+        tolerance = self.config.ransac_px * max(1.0, max(shape) / self.config.max_side)  # full-resolution px
+        deep = synthesized_labels(H, shape, max(self.config.seam_px, math.ceil(tolerance)))
+        return int(np.count_nonzero(deep == LABEL_SYNTH)) >= self.config.min_synth_fraction * deep.size
 
     def result(self) -> tuple[float, float, float]:
         """(synth_flicker_ratio, synth_change_mean, real_change_mean); NaN without a counted pair."""
