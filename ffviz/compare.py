@@ -421,10 +421,10 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
 def add_parser(commands) -> None:
     p = commands.add_parser(
         "compare", help="videos side by side (input | ffviz | another stabilizer), labelled, with their camera paths",
-        description="Write a video of INPUT and its stabilized versions side by side, each labelled, scaled to one "
-                    "height and aligned by time, with every video's camera path (estimated from its frames) plotted "
-                    "underneath and a cursor at the moment shown; the audio is INPUT's. People judge stabilizers by "
-                    "looking.",
+        description="Write a video of INPUT and its stabilized versions side by side, each labelled, scaled to one\n"
+                    "height and aligned by time, with every video's camera path (estimated from its frames) plotted\n"
+                    "underneath and a cursor at the moment shown; the audio is INPUT's. People judge stabilizers by\n"
+                    "looking. More: docs/usage.md, \"Comparing side by side\".",
         epilog="example:\n  ffviz compare shaky.mp4 steady.mp4 vidstab.mp4 -o sbs.mp4 --labels "
                "original,ffviz,vid.stab",
         formatter_class=argparse.RawDescriptionHelpFormatter)
