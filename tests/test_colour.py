@@ -181,6 +181,30 @@ def test_a_codec_without_10_bits_says_so_in_one_line_and_keeps_the_tags(tmp_path
     assert np.abs(rgb_out - rgb_in).max() * 255 <= 1.0  # 8 bits of the same colour
 
 
+def test_422_input_is_written_420_with_one_warning_line_and_its_tags_and_depth(tmp_path, capsys):
+    path = tmp_path / "in422.mkv"
+    description = ColourDescription(matrix=1, range=1, primaries=1, transfer=1, bit_depth=10)
+    with av.open(str(path), "w") as container:  # 4:2:2 by swscale from exact 4:2:0 pictures: the same colours
+        stream = container.add_stream("libx265", rate=25, options={"crf": "8", "x265-params": "log-level=error"})
+        stream.width, stream.height, stream.pix_fmt = W, H, "yuv422p10le"
+        colours.tag_stream(stream.codec_context, description)
+        for t in range(N):
+            frame = colours.from_rgb(scene(t), description, "yuv420p10le").reformat(format="yuv422p10le")
+            frame.pts = t
+            for packet in stream.encode(frame):
+                container.mux(packet)
+        for packet in stream.encode(None):
+            container.mux(packet)
+    output = tmp_path / "out.mp4"
+    assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", "none"]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if "4:2:2 input written as 4:2:0" in line]
+    assert len(lines) == 1
+    with av.open(str(output)) as container:
+        assert next(container.decode(video=0)).format.name == "yuv420p10le"
+    tags = stream_tags(output)
+    assert (tags["matrix"], tags["range"], tags["primaries"], tags["transfer"], tags["depth"]) == (1, 1, 1, 1, 10)
+
+
 def test_display_rgb_shows_hdr_white_near_sdr_white_and_leaves_sdr_alone():
     sdr = ColourDescription(matrix=1, primaries=1, transfer=1)
     frame = scene(0)
