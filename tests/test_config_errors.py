@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.stages import completion, deblur, fmm, l1_path, local_flow, mosaic, motion, smoothing
+from pipeline.stages import adaptive_crop, completion, deblur, fmm, l1_path, local_flow, mosaic, motion, path_control
+from pipeline.stages import smoothing
 from pipeline.evaluation import metrics
 from pipeline import stabilize
 from pipeline.evaluation import synthetic
@@ -33,8 +34,13 @@ BAD = {
     motion.MotionConfig: [dict(model="nope"), dict(refine="nope"), dict(ignore=((0, 0, 5, 5),))],
     motion.IgnoreRegion: [dict(x=0, y=0, width=0, height=5), dict(x=-1, y=0, width=5, height=5),
                           dict(x=0, y=0, width=5, height=5, start_s=3.0, end_s=1.0)],
-    smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0), dict(path="nope")],
-    l1_path.L1PathConfig: [dict(margin_fraction=0.0), dict(margin_deg=-1.0), dict(window=4), dict(overlap=2),
+    smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0), dict(path="nope"), dict(max_shift=-1.0),
+                                dict(max_angle=float("nan")), dict(path="tripod", smoothness=path_control.Smoothness()),
+                                dict(segments=(path_control.PathSegment(0.0, None, "nope"),))],
+    path_control.Smoothness: [dict(translation=101.0), dict(zoom=-1.0), dict(rotation=float("nan"))],
+    path_control.PathSegment: [dict(start_s=-1.0), dict(end_s=0.0), dict(smoothness=path_control.Smoothness())],
+    adaptive_crop.CropConfig: [dict(kind="nope"), dict(zoom_speed=0.0)],
+    l1_path.L1PathConfig: [dict(margin_fraction=-0.1), dict(margin_deg=-1.0), dict(window=4), dict(overlap=2),
                            dict(window=100, overlap=60)],
     stabilize.StabilizeConfig: [dict(mode="nope")],
     synthetic.SyntheticConfig: [dict(width=4), dict(n_frames=0), dict(fps=0.0), dict(fps=float("nan")),
@@ -43,7 +49,8 @@ BAD = {
 }
 CASES = [(cls, kwargs) for cls, bad in BAD.items() for kwargs in bad]
 # Classes with required fields: a valid set, which each bad case overrides.
-VALID = {motion.IgnoreRegion: dict(x=0, y=0, width=5, height=5)}
+VALID = {motion.IgnoreRegion: dict(x=0, y=0, width=5, height=5),
+         path_control.PathSegment: dict(start_s=0.0, end_s=5.0, path="tripod")}
 
 
 def test_config_error_is_an_ffviz_error_and_a_value_error():

@@ -228,6 +228,14 @@ options = st.fixed_dictionaries(
         "--qscale": mostly(st.integers(2, 31), st.one_of(st.integers(-(2**31), 2**31), st.sampled_from(["3.5", "q"]))),
         "--deblur-alpha": mostly(st.floats(0.1, 1000), st.floats(allow_nan=True, allow_infinity=True)),
         "--no-deblur": st.just(None),
+        "--smoothness": mostly(st.one_of(st.floats(0, 100).map(_number), st.sampled_from(["t=80,z=20", "r=0"])),
+                               st.sampled_from(["101", "nan", "t=", "q=5", "-1", ""])),
+        "--max-shift": mostly(st.floats(0, 100), st.floats(allow_nan=True, allow_infinity=True)),
+        "--max-angle": mostly(st.floats(0, 10), st.floats(allow_nan=True, allow_infinity=True)),
+        "--path-segment": mostly(st.sampled_from(["0-0.5:tripod", "0.3-:l1:70", "-0.2:gaussian:t=90"]),
+                                 st.sampled_from(["5:l1", "1-0:tripod", "0-1:dolly", "0-1:tripod:50", "x-y:l1"])),
+        "--crop": mostly(st.sampled_from(["fixed", "adaptive"]), st.just("wide")),
+        "--zoom-speed": mostly(st.floats(0.01, 10), st.floats(allow_nan=True, allow_infinity=True)),
     },
 )
 
