@@ -634,8 +634,9 @@ class RerunRecorder:
             self._on_crop(plan.crop)
             self._on_crop_scales(np.full(len(plan.orig_from_out), plan.crop.scale))
         if plan.adaptive_crop is not None:
-            self._adaptive = plan.adaptive_crop
+            self._adaptive = self._crop = plan.adaptive_crop
             self._on_crop_scales(plan.adaptive_crop.scales)
+            self._log_meta()
 
     def _on_crop_scales(self, scales: np.ndarray) -> None:
         """--mode crop: the window's scale per frame (constant for one window; --crop adaptive's follows the path)."""
@@ -949,7 +950,11 @@ class RerunRecorder:
                      "frame streams as H.264 video, masks as lossless PNG, maps as 16-bit PNG"))
         if config is not None:
             lines += ["", "## Settings", ""] + [f"- {row}" for row in _config_rows(config)]
-        if crop is not None:
+        if crop is not None and hasattr(crop, "scales"):  # --crop adaptive
+            lines.append(f"- adaptive crop: scale {crop.scales.min():.3f}-{crop.scales.max():.3f} about "
+                         f"({crop.anchor[0]:.1f}, {crop.anchor[1]:.1f}), {crop.cropping_ratio:.1%} of the area kept "
+                         f"on average (stabilized/crop_scale)")
+        elif crop is not None:
             lines.append(f"- crop window: x0 {crop.x0:.1f}, y0 {crop.y0:.1f}, scale {crop.scale:.3f} "
                          f"({crop.cropping_ratio:.1%} of the area kept)")
         lines += ["", "## Run", ""]

@@ -223,6 +223,7 @@ def test_the_recording_holds_each_setting_path_and_crop_and_the_figure_shows_the
     scales = recording.scalars(ent.CROP_SCALE)[1]
     assert len(scales) == 45 and 0.3 < scales.min() <= scales.max() <= 1.0
     np.testing.assert_allclose(scales, plan.adaptive_crop.scales, atol=1e-6)
+    assert "adaptive crop: scale" in recording.texts(ent.META, "TextDocument:text")[-1]
     fig = figures.trajectories(recording)
     texts = [t.get_text() for ax in fig.axes for t in ax.texts]
     assert "0-0.5:tripod" in texts and "gaussian:t=70,r=30,z=50" in texts
