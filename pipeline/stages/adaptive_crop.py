@@ -1,9 +1,11 @@
 """Adaptive crop for ``--mode crop``: a window whose zoom follows the path over time (Warp Stabilizer's "crop less,
 smooth more"; vid.stab ``optzoom=2`` with ``zoomspeed``), instead of one window valid in every frame.
 
-The window of frame t is centred on the output frame and scaled by z_t (stab = centre + z_t (out - centre)). Its
-largest valid scale m_t is the largest z whose four corners lie inside frame t's valid region (the input frame
-mapped into stabilized coordinates, a convex quad; a linear bound on z per edge and corner). The chosen scales are
+The window of frame t is centred on one anchor point a for the whole clip and scaled by z_t (stab = a + z_t (out -
+centre)); a is the fixed crop's centre or the frame centre, whichever keeps more (about the first, no frame keeps
+less than the fixed crop). The largest valid scale m_t is the largest z whose four corners lie inside frame t's
+valid region (the input frame mapped into stabilized coordinates, a convex quad; a linear bound on z per edge and
+corner) and inside the frame. The chosen scales are
 m_t limited to a rate (``zoom_speed``: the cone envelope min_j m_j + rate |t - j|, forward and backward), then
 eroded and Gaussian-smoothed over ``radius`` frames. The mean of an erosion over a window no wider than the
 erosion's stays below the input at every frame, so z_t <= m_t still: no black pixel on any frame, by
@@ -23,7 +25,7 @@ from pipeline.errors import ConfigError
 
 DEFAULT_ZOOM_SPEED = 0.1  # % of the frame's size a frame (vid.stab's zoomspeed defaults to 0.25: see docs/decisions.md)
 SMOOTH_RADIUS = 30  # frames of erosion and of Gaussian smoothing (a second at 30 fps)
-MIN_SCALE = 0.05  # a frame whose centred window would be smaller than this has no usable crop
+MIN_SCALE = 0.05  # a frame whose window about the anchor would be smaller than this has no usable crop
 EDGE_SLACK = 1e-3  # the window is kept this fraction inside its largest valid size (bilinear reads at the edge)
 
 
