@@ -267,3 +267,20 @@ def test_a_tripod_holds_the_median_view_not_a_corner_of_its_margins():
     median = np.median(result.original_trajectory, axis=0)
     assert np.abs(held[0, :2] - median[:2]).max() < 1.0 and abs(held[0, 2] - median[2]) < 0.05
     assert np.ptp(result.original_trajectory[:, :2], axis=0).min() > 20  # the input does move about it
+
+
+def test_segments_and_scene_cuts_do_not_reach_across_each_other():
+    """A shot after a cut, planned by one setting, is planned exactly as that shot alone; the switch inside the first
+    shot happens there, on the L1 path too."""
+    video = generate(SyntheticConfig(n_frames=120, moving_object=False, blurred_frames=(), seed=8))
+    times = np.arange(120) / 30.0
+    config = smoothing.SmoothingConfig(path="l1", segments=(path_control.PathSegment.parse("0-1:tripod"),))
+    result = smoothing.smooth(video.curr_from_prev, config, cuts=[60], width=W, height=H, times_s=times)
+    second = video.curr_from_prev[60:].copy()
+    second[0] = np.eye(3)
+    alone = smoothing.smooth(second, smoothing.SmoothingConfig(path="l1"), width=W, height=H)
+    np.testing.assert_allclose(result.orig_from_stab[60:], alone.orig_from_stab, atol=1e-9)
+    assert list(result.setting_of[[0, 29, 30, 59, 60, 119]]) == [1, 1, 0, 0, 0, 0]
+    assert result.settings == ("l1", "0-1:tripod")
+    tripod = smoothing.smooth(video.curr_from_prev[:31], smoothing.SmoothingConfig(path="tripod"), width=W, height=H)
+    np.testing.assert_allclose(result.orig_from_stab[:31], tripod.orig_from_stab, atol=1e-9)
