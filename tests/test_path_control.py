@@ -284,3 +284,17 @@ def test_segments_and_scene_cuts_do_not_reach_across_each_other():
     assert result.settings == ("l1", "0-1:tripod")
     tripod = smoothing.smooth(video.curr_from_prev[:31], smoothing.SmoothingConfig(path="tripod"), width=W, height=H)
     np.testing.assert_allclose(result.orig_from_stab[:31], tripod.orig_from_stab, atol=1e-9)
+
+
+def test_a_tripod_segment_warns_only_for_its_own_frames():
+    """A tripod over the first second of a fast pan cannot hold (the pan leaves its margin): the warning names
+    frames within that second; the eq. 18 stretch after it moves freely and is not reported."""
+    video = generate(SyntheticConfig(n_frames=90, moving_object=False, blurred_frames=(), seed=4,
+                                     pan_px_per_frame=5.0))
+    times = np.arange(90) / 30.0
+    config = smoothing.SmoothingConfig(segments=(path_control.PathSegment.parse("0-1:tripod"),))
+    result = smoothing.smooth(video.curr_from_prev, config, width=W, height=H, times_s=times)
+    [warning] = smoothing.path_warnings(result, config)
+    ranges = [tuple(int(v) for v in part.split("-")) for part in warning.split("frames ")[1].split(", ")]
+    assert ranges and all(0 <= a < b <= 30 for a, b in ranges), warning
+    assert smoothing.path_warnings(result, smoothing.SmoothingConfig()) == []
