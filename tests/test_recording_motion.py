@@ -68,8 +68,10 @@ def test_ignore_box_is_outlined_while_active(run):
     assert shown and min(shown) == 7  # drawn from the first pair whose earlier frame (6) it covers
     strip = np.array(logged[shown[0]][0])
     # The outline lies on the box's border (full-resolution px; the motion pass works at full size here).
-    assert strip[:, 0].min() == pytest.approx(BOX.x, abs=1) and strip[:, 0].max() == pytest.approx(BOX.x + BOX.width - 1, abs=1)
-    assert strip[:, 1].min() == pytest.approx(BOX.y, abs=1) and strip[:, 1].max() == pytest.approx(BOX.y + BOX.height - 1, abs=1)
+    assert strip[:, 0].min() == pytest.approx(BOX.x, abs=1)
+    assert strip[:, 0].max() == pytest.approx(BOX.x + BOX.width - 1, abs=1)
+    assert strip[:, 1].min() == pytest.approx(BOX.y, abs=1)
+    assert strip[:, 1].max() == pytest.approx(BOX.y + BOX.height - 1, abs=1)
     cleared = [t for t, v in logged.items() if v is None]
     assert cleared and min(cleared) == 12  # and cleared after the last such pair (10, 11)
 

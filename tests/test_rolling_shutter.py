@@ -204,3 +204,23 @@ def test_full_mode_completes_from_neighbours_corrected_alike(monkeypatch):
     corrected = mean_variance()
     monkeypatch.setattr(rolling_shutter, "middle_row_view", lambda rgb, rows: rgb)
     assert corrected < 0.5 * mean_variance()
+
+
+def test_segment_run_plans_the_whole_runs_correction(tmp_path):
+    """Segments join their inlier tracks, so the correction and every output transform are the whole run's."""
+    from pipeline.evaluation.synthetic import write_video
+    from pipeline.runtime import segments
+    from pipeline.stabilize import stabilize
+
+    path = tmp_path / "in.mp4"
+    write_video(generate(SyntheticConfig(width=320, height=180, n_frames=20, moving_object=False, blurred_frames=(),
+                                         readout=0.9, seed=3)), path)
+    config = StabilizeConfig(mode="none", rolling_shutter="auto")
+    whole, parts = _Keep(), _Keep()
+    stabilize(path, None, config, workers=1, observer=whole)
+    segments.run(path, None, config, segment_frames=7, observer=parts)
+    a, b = whole.plan.rolling_shutter, parts.plan.rolling_shutter
+    assert a.readout == b.readout > 0.5
+    assert all(np.array_equal(x.velocity, y.velocity) and np.array_equal(x.acceleration, y.acceleration)
+               for x, y in zip(a.rows, b.rows))
+    assert np.array_equal(whole.plan.orig_from_out, parts.plan.orig_from_out)
