@@ -53,7 +53,12 @@ FRAME_SIZE_FIELD = "frame_size"  # (width, height) of a frame stream whose size 
 WEIGHTS_STEP = 8  # deblur/weights in the compact recording: multiples of 8/255 (--lossless: of 1/255)
 QUEUE_EVENTS = 48  # stage results waiting for the recorder's thread (~6 frames' worth): bounds the memory held
 _STOP = object()
-BATCHER = rr.ChunkBatcherConfig(flush_tick=2.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
+# Chunks of up to 4 MB / 4096 rows. A file-only recording flushes on those alone (a tick would make the file's size
+# depend on the machine's speed: every flush writes each entity's schema again; vplab_C's full recording
+# carried 1.0 MB beyond its data in a 214 s run and 5.9 MB in a 1189 s one);
+# a live view also flushes every 2 s so that the viewer follows the run.
+BATCHER = rr.ChunkBatcherConfig(flush_tick=3600.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
+LIVE_BATCHER = rr.ChunkBatcherConfig(flush_tick=2.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
 MISSING_LEGEND = [(0, "valid", (0, 0, 0, 0)), (MISSING_CLASS, "missing", (255, 0, 64, 160))]
 ACCEPTED_LEGEND = [(0, "known", (0, 0, 0, 0)), (1, "missing, rejected by the mosaic", (255, 0, 64, 160)),
                    (2, "missing, accepted by the mosaic", (40, 200, 90, 160))]
@@ -359,9 +364,10 @@ class RerunRecorder:
         fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".rrd.tmp", dir=self.path.parent)
         os.close(fd)
         self._tmp_path = Path(tmp)
-        # Rows batched into chunks of up to ~2 s / 4 MB: a chunk per log call (the default for a slow producer)
-        # costs its schema (a few kB) each time, more than a compressed mask or video sample.
-        self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()), batcher_config=BATCHER)
+        # Rows batched into chunks (BATCHER): a chunk per log call (the default for a slow producer) costs its
+        # schema (a few kB) each time, more than a compressed mask or video sample.
+        self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()),
+                                      batcher_config=BATCHER if live_url is None else LIVE_BATCHER)
         self.live_url = live_url
         if live_url is None:
             self.rec.save(self._tmp_path)  # the default blueprint follows once the traced frames are known
