@@ -18,6 +18,7 @@ from typing import Sequence
 from ffviz.runner import DEFAULT_RECORDINGS, output_encoding, run_stabilize, stabilize_config
 from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (tests call cli.view_command)
 from pipeline.stages import adaptive_crop, deblur, motion, smoothing
+from pipeline import presets
 from pipeline import stabilize as stab
 from pipeline.runtime import video_io
 from pipeline.errors import ConfigError, FFVizError
@@ -258,6 +259,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--deblur-alpha", type=float, default=deblur.DEBLUR_ALPHA, metavar="ALPHA",
                    help="eq. 31 sensitivity to the alignment error, in intensity levels 0-255: larger lets "
                         "less well aligned neighbours contribute more (default: %(default)s)")
+    p.add_argument("--quality", choices=presets.QUALITIES, default="default",
+                   help="full mode's completion and deblurring effort: default (the thesis's chain) or fast (local "
+                        "warp from two neighbours at half the flow resolution, deblurring over +-3 frames: less CPU "
+                        "for some PSNR in the filled borders; docs/benchmarks-speed.md) (default: %(default)s)")
     if rrd_folder:
         p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=rrd_default, metavar="DIR",
                        help="write one Rerun recording per video, DIR/<input name>.rrd; --rrd alone: "

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Sequence
 
 from pipeline.stages import adaptive_crop, deblur, motion, path_control, smoothing
+from pipeline import presets
 from pipeline import stabilize as stab
 from pipeline.runtime import video_io
 from pipeline.errors import ConfigError
@@ -67,7 +68,7 @@ def parse_ignore(text: str) -> motion.IgnoreRegion:
 def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
     _check_options(args)
     try:
-        return stab.StabilizeConfig(
+        return presets.with_quality(stab.StabilizeConfig(
             mode=args.mode,
             motion=motion.MotionConfig(model=args.motion_model, refine=args.refine,
                                        ignore=tuple(parse_ignore(text) for text in getattr(args, "ignore", [])),
@@ -84,7 +85,7 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
             crop=adaptive_crop.CropConfig(kind=getattr(args, "crop", "fixed"),
                                           zoom_speed=getattr(args, "zoom_speed", adaptive_crop.DEFAULT_ZOOM_SPEED)),
             rolling_shutter=getattr(args, "rolling_shutter", None),
-        )
+        ), getattr(args, "quality", "default"))
     except ValueError as error:  # the configs validate their own values
         raise ConfigError(str(error)) from None
 
