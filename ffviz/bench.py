@@ -347,6 +347,27 @@ def add_parser(commands: Any) -> None:
     p.add_argument("-o", "--output", type=Path, default=None, metavar="REPORT.md",
                    help="the dated report (machine, versions, table, targets; its plot beside it as .png) "
                         f"(default: {DEFAULT_REPORT.relative_to(REPO)} in a source checkout, else DIR/benchmarks.md)")
+    p.add_argument("--profile", action="store_true",
+                   help="instead: CPU ms a frame of each stage (decode, motion, smoothing, warp, mosaic, flow, FMM, "
+                        "local warp, deblur, encode, recording) of each clip and --modes, one worker, in this process; "
+                        "prints a table and runs no peer")
+
+
+def _profile(clips: Sequence[Path], modes: Sequence[str]) -> int:
+    """--profile: the per-stage CPU table (ffviz/bench_profile.py) on stdout."""
+    from ffviz import bench_profile
+
+    rows = []
+    for clip in clips:
+        for mode in modes:
+            base, _, codec = mode.partition("-")
+            profile = bench_profile.profile_stages(clip, base, codec=codec or "auto")
+            profile.mode = mode
+            rows.append(profile.line())
+    print("CPU ms a frame by stage (one worker, in process; total: the run without recording, every thread)")
+    print(bench_profile.table_header())
+    print("\n".join(rows), flush=True)
+    return 0
 
 
 def _choices(text: str, allowed: Sequence[str], option: str) -> list[str]:
@@ -395,6 +416,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from ffviz import bench_report as report
 
     modes = _choices(args.modes, MODES + MPEG4_MODES, "--modes")
+    if args.profile:
+        return _profile(_clips(args.videos, args.output_dir), modes)
     peers = [] if args.peers.strip() == "none" else _choices(args.peers, PEERS, "--peers")  # "none" is also a mode
     if args.repeat < 1:
         raise ConfigError(f"--repeat must be at least 1, not {args.repeat}")

@@ -254,3 +254,19 @@ def test_targets_flag_rows_measured_while_the_machine_was_stolen():
     assert len(warnings) == 1 and "a.mp4 ffviz full 30 %" in warnings[0] and "opencv" not in warnings[0]
     assert "| 2 |" in markdown_line(quiet) and "| 30 |" in markdown_line(busy)  # the median run's share
     assert not any("steal above" in line for line in targets(rows[:2]))
+
+
+def test_profile_attributes_the_cpu_to_every_stage_of_full_mode(tiny_clip, capsys):
+    from ffviz.bench_profile import STAGES
+
+    assert main(["bench", str(tiny_clip), "--profile", "--modes", "full"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| tiny.mp4 | full |")]
+    assert len(rows) == 1
+    cells = [float(c) for c in rows[0].strip("|").split("|")[2:]]
+    by_stage, total = dict(zip(STAGES, cells)), cells[-1]
+    # each stage's functions were found and ran (a renamed stage function would read 0 here)
+    for stage in ("decode", "motion", "smoothing", "warp", "mosaic", "flow", "FMM", "local warp", "deblur", "encode",
+                  "recording"):
+        assert by_stage[stage] > 0, stage
+    # the stages of the run without recording add up to its measured CPU, with what no stage claims as 'other'
+    assert sum(by_stage[s] for s in STAGES if s != "recording") == pytest.approx(total, rel=0.02, abs=0.3)
