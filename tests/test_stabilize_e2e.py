@@ -166,6 +166,17 @@ def _page_served(port: int, timeout_s: float = 30.0) -> bool:
             time.sleep(0.5)
 
 
+def _stop(process: subprocess.Popen) -> None:
+    """Ctrl-C, then SIGTERM (which the CLI also turns into a clean stop of the viewer it started), then kill."""
+    for stop in (lambda: process.send_signal(signal.SIGINT), process.terminate, process.kill):
+        stop()
+        try:
+            process.wait(timeout=60)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
 def test_stabilize_view_streams_live_and_also_saves_the_recording(shaky, tmp_path):
     """`ffviz stabilize --view`: the web viewer serves while the run goes and after it, the .rrd and the video are
     written whole, and Ctrl-C ends it cleanly (exit 0, the viewer's ports closed)."""
@@ -178,20 +189,19 @@ def test_stabilize_view_streams_live_and_also_saves_the_recording(shaky, tmp_pat
                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert f"http://127.0.0.1:{web}/" in process.stdout.readline()
-        assert _page_served(web)
+        assert _page_served(web, timeout_s=120)
         lines = []
         for line in process.stdout:  # the run ends; the viewer keeps serving
             lines.append(line)
             if "still serving" in line:
                 break
         assert any("still serving" in line for line in lines), lines
-        assert _page_served(web, timeout_s=5)
+        assert _page_served(web, timeout_s=60)
         assert video_io.count_frames(out) == len(video.frames)
         recording = Recording.load(rrd)
         assert recording.indices(ent.OUTPUT_FRAME) == list(range(len(video.frames)))
     finally:
-        process.send_signal(signal.SIGINT)
-        process.wait(timeout=30)
+        _stop(process)
     assert process.returncode == 0
     for port in (web, grpc):
         with socket.socket() as probe:
