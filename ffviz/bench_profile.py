@@ -31,12 +31,13 @@ def _functions() -> dict[str, tuple]:
     """stage -> the functions whose cumulative CPU on the main thread is that stage's (none calls another)."""
     from pipeline import chain
     from pipeline.runtime import video_io
-    from pipeline.stages import completion, fmm, local_flow, motion
+    from pipeline.stages import completion, fmm, local_flow, mosaic, motion
 
     return {"decode": (video_io.VideoReader.__iter__,),
             "motion": (motion.prepare, motion.estimate, motion.choose_background),
             "smoothing": (chain.plan_path,),
-            "mosaic": (completion._mosaic, completion.register_neighbours),
+            "mosaic": tuple(f for f in (mosaic.mosaic_from_samples, getattr(completion, "register_neighbours", None))
+                            if f is not None),  # with the neighbours' local registration where there is one
             "flow": (local_flow.local_flow,),
             "FMM": (fmm.inpaint_motion,),
             "encode": (video_io.VideoWriter.write, video_io.VideoWriter.close)}
