@@ -31,7 +31,7 @@ BAD = {
     local_flow.LocalFlowConfig: [dict(method="nope"), dict(dis_preset="nope")],
     metrics.MetricsConfig: [dict(feature="surf"), dict(max_side=8)],
     mosaic.MosaicConfig: [dict(min_neighbours=1), dict(variance_threshold=0.0)],
-    motion.MotionConfig: [dict(model="nope"), dict(refine="nope"), dict(ignore=((0, 0, 5, 5),))],
+    motion.MotionConfig: [dict(model="nope"), dict(refine="nope"), dict(ignore=((0, 0, 5, 5),)), dict(hist_step=0)],
     motion.IgnoreRegion: [dict(x=0, y=0, width=0, height=5), dict(x=-1, y=0, width=5, height=5),
                           dict(x=0, y=0, width=5, height=5, start_s=3.0, end_s=1.0)],
     smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0), dict(path="nope"), dict(max_shift=-1.0),
