@@ -792,8 +792,8 @@ class VideoWriter:
             self.warnings.append(f"{colour.chroma} input written as 4:2:0 (colour tags and depth kept)")
         self._colour, self._pix_fmt = colour, "yuv420p" if depth == 8 else f"yuv420p{depth}le"
         stream = self._container.add_stream(_ENCODERS[codec], rate=fps, options=options)
-        # PyAV asks for slice threads by default, so x264 would slice each frame; AUTO lets it use frame threads as
-        # the ffmpeg command line does: the same CPU time in less wall time (docs/benchmarks-speed.md)
+        # PyAV asks for slice threads by default, so x264 would cut each frame into a slice per thread; AUTO lets it
+        # use frame threads as the ffmpeg command line does (one slice a frame; the same CPU: docs/benchmarks-speed.md)
         stream.codec_context.thread_type = "AUTO"
         # yuv420p halves chroma, so H.264 needs even sizes (its crop step is 2 pixels too). An odd
         # side is padded by one replicated edge pixel: the output is at most 1 px wider/taller,
