@@ -187,6 +187,8 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "filled_by": (ent.COMPLETION_FILLED_BY,),
         "fallback": (ent.COMPLETION_FALLBACK,),
         "corrected": NotRecorded("mosaic pixels replaced by a local warp; shown within filled_by"),
+        "registered": NotRecorded("neighbours whose warps local registration refined; their pixels are in filled_by"),
+        "unregistered_mosaic": NotRecorded("made only on request: the evaluation's baseline without registration"),
     },
     "MosaicResult": {
         "frame": (ent.trace_image("*"),),  # traced frames' "mosaic" stage

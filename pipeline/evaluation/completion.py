@@ -92,8 +92,9 @@ class _CompletionJudge(NullObserver):
 
 
 def mosaic_telea(completed) -> np.ndarray:
-    """What OpenCV's CPU chain makes of the same frame: our consistent mosaic, then Telea for what it left."""
-    mosaic_only = completed.mosaic
+    """What OpenCV's CPU chain makes of the same frame: our consistent mosaic of the global warps (it has no local
+    registration), then Telea for what it left."""
+    mosaic_only = completed.unregistered_mosaic() if completed.unregistered_mosaic is not None else completed.mosaic
     return cv2.inpaint(mosaic_only.frame, mosaic_only.remaining.astype(np.uint8), TELEA_RADIUS, cv2.INPAINT_TELEA)
 
 

@@ -1,9 +1,11 @@
 """Full-frame video completion (thesis chapter 4): the ordered chain that fills a stabilized frame's missing area.
 
+0. local registration (``register_neighbours``): each neighbour's global warp refined on the band next to the
+   missing area, where a chain of global motions has drifted by pixels on far neighbours;
 1. consistent mosaicing (eqs. 20-22, ``mosaic``): static areas, median of neighbours that agree;
 2. local-warp mosaicing: for the ``max_warp_neighbours`` nearest neighbours, local flow over the common area
    (``local_flow``), motion inpainting of that flow into the missing area by Fast Marching (eq. 24, ``fmm``)
-   and a candidate sample through it (eq. 25);
+   and a candidate sample through it (eq. 25); where none reaches, a covering neighbour's sample as it is;
 3. a smooth last-resort fill (``fallback``) for what no neighbour covers.
 
 Invariants: every neighbour arrives already warped into the target's stabilized coordinates, with its valid
@@ -25,10 +27,11 @@ t+k (``neighbour_order``); flows and inpainting run only in boxes around the pix
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Sequence
+from typing import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -45,6 +48,11 @@ SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback")
 # Distances in pixels of the local flow's working resolution (see CompletionConfig.flow_max_side).
 NEAR_MISSING_PX = 12  # motion inpainting works within this distance of the missing area (> flow's erosion)
 RESCUE_NEAR_MISSING_PX = 40  # large motions the flow missed are searched for this close to the missing area
+_ECC_MODELS = {"translation": cv2.MOTION_TRANSLATION, "affine": cv2.MOTION_AFFINE,
+               "homography": cv2.MOTION_HOMOGRAPHY}
+# ECC's iterations per neighbour: it starts from the global warp, a pixel or two off (see docs/completion.md).
+_ECC_ITERATIONS = 10
+_MIN_REGISTER_PIXELS = 200  # fewer band pixels than this (at the working resolution): the warp is left as it is
 
 
 @dataclass(frozen=True)
@@ -68,6 +76,19 @@ class CompletionConfig:
     # a ninth of the pixels. None: full resolution.
     flow_max_side: int | None = 640
     confirm_difference: float | None = 20.0
+    # Local registration before the mosaic (see register_neighbours): each neighbour's global warp refined by ECC
+    # on frame t's known pixels within ``register_band_px`` of the missing area, with this motion model
+    # ("translation", "affine", "homography"; None: off); a refinement that moves a frame corner further than
+    # ``register_max_px`` or lowers the band's error by less than 5 % is refused. Working resolution: longest
+    # side at most ``register_max_side`` (None: full).
+    register_model: str | None = "homography"
+    register_band_px: int = 24
+    register_max_px: float = 12.0
+    register_max_side: int | None = 320
+    # Pixels the mosaic refused and no local warp reached, but some neighbour covers, take the covering
+    # neighbour's sample (zero local motion) whose warp best explains the surroundings, instead of the smooth
+    # fallback.
+    static_fill: bool = True
     mosaic: mosaic.MosaicConfig = field(default_factory=mosaic.MosaicConfig)
     flow: local_flow.LocalFlowConfig = field(default_factory=local_flow.LocalFlowConfig)
     inpaint: fmm.MotionInpaintConfig = field(default_factory=fmm.MotionInpaintConfig)
@@ -81,6 +102,15 @@ class CompletionConfig:
             raise ConfigError(f"flow_max_side must be at least 32 px, not {self.flow_max_side}")
         if self.residual_radius < 0:
             raise ConfigError(f"residual_radius must be >= 0, not {self.residual_radius}")
+        if self.register_model is not None and self.register_model not in _ECC_MODELS:
+            raise ConfigError(f"register_model must be one of {', '.join(_ECC_MODELS)} or None, "
+                              f"not {self.register_model!r}")
+        if self.register_band_px < 1:
+            raise ConfigError(f"register_band_px must be >= 1, not {self.register_band_px}")
+        if not self.register_max_px > 0:
+            raise ConfigError(f"register_max_px must be positive, not {self.register_max_px}")
+        if self.register_max_side is not None and self.register_max_side < 32:
+            raise ConfigError(f"register_max_side must be at least 32 px, not {self.register_max_side}")
 
 
 @dataclass(frozen=True)
@@ -177,6 +207,11 @@ class CompletionResult:
     filled_by: np.ndarray  # (H, W) int16: neighbour offset of local-warp pixels, 0 elsewhere
     fallback: np.ndarray  # (H, W) bool: pixels the last resort filled
     corrected: np.ndarray | None = None  # (H, W) bool: mosaic pixels the local warp replaced (moving content)
+    registered: tuple[int, ...] = ()  # offsets of the neighbours whose warps local registration refined
+    # A call returning the mosaic.MosaicResult of the unrefined global warps, made on request (what OpenCV's
+    # chain, which has no local registration, would start from: the evaluation's baseline); None when no warp
+    # was refined.
+    unregistered_mosaic: Callable[[], object] | None = None
 
 
 @dataclass
@@ -287,14 +322,20 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
     after warping) cost 1.2 dB on a 1080p scene: the neighbours came out slightly blurrier than frame t.
     """
     height, width = missing.shape
+    registered: tuple[int, ...] = ()
+    unregistered_mosaic = None
+    if config.register_model is not None:
+        as_given = neighbours
+        neighbours = register_neighbours(target, missing, neighbours, config, target_original=target_original)
+        registered = tuple(b.offset for a, b in zip(as_given, neighbours) if a is not b)
+        if registered:
+            unregistered_mosaic = functools.partial(_mosaic, target, missing, as_given, config.mosaic)
     source = np.where(missing, SOURCE_FALLBACK, SOURCE_ORIGINAL).astype(np.uint8)
     filled_by = np.zeros((height, width), np.int16)
     ys, xs = geometry.mask_pixels(missing)  # the pixels to fill
     # Each neighbour is looked at only where needed (pipeline/stages/neighbours.py): first at the missing pixels.
     at_missing = [n.at(ys, xs) for n in neighbours]
-    mosaic_result = mosaic.mosaic_from_samples(
-        target, missing, np.stack([c for c, _ in at_missing]) if neighbours else None,
-        np.stack([v for _, v in at_missing]) if neighbours else None, config.mosaic)
+    mosaic_result = _mosaic(target, missing, neighbours, config.mosaic, at_missing)
     frame = mosaic_result.frame.copy()
     source[mosaic_result.accepted] = SOURCE_MOSAIC
     remaining = mosaic_result.remaining.copy()
@@ -303,15 +344,24 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
     known = ~missing
     order, errors = _by_distance(neighbours), [float("nan")] * len(neighbours)
     fills: list[NeighbourFill] = []
-    if len(ys) and known.any() and config.max_warp_neighbours > 0 and neighbours:
+    local_error: _LocalError | None = None
+    static_errors: list[np.ndarray] = []  # (neighbours, missing pixels): local error with zero local motion, once
+
+    def errors_without_motion() -> np.ndarray:
+        if not static_errors:
+            static_errors.append(np.stack([local_error(*n.at(local_error.band_y, local_error.band_x))
+                                           for n in neighbours]))
+        return static_errors[0]
+
+    if len(ys) and known.any() and neighbours and (config.max_warp_neighbours > 0 or config.static_fill):
         local_error = _LocalError(target, known, ys, xs, config.residual_radius)
+    if local_error is not None and config.max_warp_neighbours > 0:
         accepted = mosaic_result.accepted[ys, xs]
         # Mosaic pixels can only be replaced where the static scene explains the surroundings worse than the
         # margin (a candidate's error is >= 0): elsewhere nothing needs a flow.
         static_error = np.full(len(ys), -np.inf, np.float32)
         if config.check_mosaic and accepted.any():
-            per_neighbour = np.stack([local_error(*n.at(local_error.band_y, local_error.band_x))[accepted]
-                                      for n in neighbours])
+            per_neighbour = errors_without_motion()[:, accepted]
             covered = ~np.isnan(per_neighbour).all(axis=0)  # no neighbour sees the surroundings: no evidence
             static_error[np.flatnonzero(accepted)[covered]] = _nan_median_columns(per_neighbour[:, covered])
         checked = accepted & (static_error > config.mosaic_check_margin)
@@ -337,11 +387,34 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
                 fill.filled[py[which == k], px[which == k]] = True
                 filled_by[py[which == k], px[which == k]] = fill.offset
 
+    if config.static_fill and local_error is not None and remaining.any():
+        rest = np.flatnonzero(remaining[ys, xs])
+        which, ok = _best_static(errors_without_motion()[:, rest], [(c[rest], v[rest]) for c, v in at_missing],
+                                 config.confirm_difference)
+        pick, which = rest[ok], which[ok]
+        py, px = ys[pick], xs[pick]
+        frame[py, px] = np.stack([c[pick] for c, _ in at_missing])[which, np.arange(len(pick))]
+        source[py, px] = SOURCE_LOCAL_WARP  # eq. 25 with zero local motion
+        filled_by[py, px] = np.array([n.offset for n in neighbours], np.int16)[which]
+        remaining[py, px] = False
+
     if remaining.any():
         frame = fallback.smooth_fill(frame, remaining)
     return CompletionResult(frame=frame, missing=missing, mosaic=mosaic_result,
                             neighbour_order=[neighbours[i].offset for i in order], fills=fills, source=source,
-                            filled_by=filled_by, fallback=remaining, corrected=corrected)
+                            filled_by=filled_by, fallback=remaining, corrected=corrected,
+                            registered=registered, unregistered_mosaic=unregistered_mosaic)
+
+
+def _mosaic(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
+            config: mosaic.MosaicConfig, at_missing: list[tuple[np.ndarray, np.ndarray]] | None = None
+            ) -> mosaic.MosaicResult:
+    """Eqs. 20-22 from the neighbours' samples at the missing pixels (``at_missing``, taken here when not given)."""
+    if at_missing is None:
+        at_missing = [n.at(*geometry.mask_pixels(missing)) for n in neighbours]
+    return mosaic.mosaic_from_samples(
+        target, missing, np.stack([c for c, _ in at_missing]) if neighbours else None,
+        np.stack([v for _, v in at_missing]) if neighbours else None, config)
 
 
 def flow_scale(shape: tuple[int, int], config: CompletionConfig) -> float:
@@ -618,6 +691,97 @@ def _best_candidate(candidates: list[_Candidate]) -> np.ndarray:
                       for c in candidates])
     best = np.argmin(error, axis=0)
     return np.where(np.isfinite(np.min(error, axis=0)), best, -1)
+
+
+def _best_static(errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]],
+                 confirm_difference: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel, the neighbour whose sample (zero local motion) to take: covering the pixel, with the lowest local
+    alignment error (``errors``, (neighbours, m), NaN where unmeasured); a sample no other neighbour shows ranks
+    after the confirmed ones, as in _best_candidate. Returns (index (m,), whether there is one (m,))."""
+    ranked = np.full(errors.shape, np.inf, np.float32)
+    for i, (colours, valid) in enumerate(samples):
+        confirmed = _seen_by_another(colours, i, samples, confirm_difference)
+        ranked[i] = np.where(valid & ~np.isnan(errors[i]),
+                             errors[i] + np.where(confirmed, np.float32(0), np.float32(1e4)), np.inf)
+    which = np.argmin(ranked, axis=0)
+    return which, np.isfinite(ranked[which, np.arange(ranked.shape[1])])
+
+
+def register_neighbours(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
+                        config: CompletionConfig = CompletionConfig(), *,
+                        target_original: WarpedNeighbour | None = None) -> list[WarpedNeighbour]:
+    """The neighbours with their global warps refined where frame t's border shows them misregistered.
+
+    The global warp of a neighbour k frames away is a chain of k inter-frame motions of a global model; near
+    the frame's border, where the missing area is, the chain's error reaches pixels on far neighbours, and on
+    fine texture that fails eq. 20's variance test (and makes a mosaic that changes from frame to frame).
+    For each neighbour, ECC (Evangelidis & Psarakis 2008; ``config.register_model``) fits the correction
+    ``other_from_here`` that best aligns it with frame t over frame t's known pixels within
+    ``register_band_px`` of the missing area, at most ``register_max_side`` px wide. A correction is kept only
+    when it moves no frame corner further than ``register_max_px`` and lowers the mean intensity difference on
+    that band by 5 % or more; otherwise the neighbour is returned as it was. Frame t itself (offset 0) is kept.
+    """
+    if not neighbours or not missing.any() or missing.all():
+        return list(neighbours)
+    height, width = missing.shape
+    scale = 1.0 if config.register_max_side is None else min(1.0, config.register_max_side / max(height, width))
+    size = (max(round(width * scale), 8), max(round(height * scale), 8))
+    reduced = size != (width, height)
+    scale_x, scale_y = size[0] / width, size[1] / height
+    # Pixel centres: full-resolution (x + 0.5) is working (x + 0.5) * scale.
+    small_from_full = np.array([[scale_x, 0.0, 0.5 * scale_x - 0.5], [0.0, scale_y, 0.5 * scale_y - 0.5],
+                                [0.0, 0.0, 1.0]])
+    full_from_small = np.linalg.inv(small_from_full)
+    band = _dilate(missing, config.register_band_px)[0] & ~missing
+    whole = (slice(0, height), slice(0, width))
+    if reduced and target_original is not None:
+        small_target, small_known = target_original.crop(whole, size)
+        band = shrink_all(band, size) & small_known
+    elif reduced:
+        small_target, band = shrink(target, size), shrink_all(band, size)
+    else:
+        small_target = target
+    target_grey = imaging.intensity(small_target)
+    if np.count_nonzero(band) < _MIN_REGISTER_PIXELS:
+        return list(neighbours)
+    corners = np.array([[0.0, width - 1.0, 0.0, width - 1.0], [0.0, 0.0, height - 1.0, height - 1.0],
+                        [1.0, 1.0, 1.0, 1.0]])
+    model = _ECC_MODELS[config.register_model]
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, _ECC_ITERATIONS, 1e-4)
+    out = []
+    for neighbour in neighbours:
+        out.append(neighbour)
+        if neighbour.offset == 0:
+            continue
+        rgb, valid = neighbour.crop(whole, size if reduced else None)
+        mask = band & valid
+        if np.count_nonzero(mask) < _MIN_REGISTER_PIXELS:
+            continue
+        grey = imaging.intensity(rgb)
+        warp = np.eye(3, dtype=np.float32) if model == cv2.MOTION_HOMOGRAPHY else np.eye(2, 3, dtype=np.float32)
+        try:
+            _, warp = cv2.findTransformECCWithMask(target_grey, grey, mask.view(np.uint8), valid.view(np.uint8), warp,
+                                                   model, criteria, 3)
+        except cv2.error:  # did not converge, or a degenerate update
+            continue
+        small_correction = np.eye(3)
+        small_correction[:warp.shape[0]] = warp
+        correction = full_from_small @ small_correction @ small_from_full
+        moved = correction @ corners
+        with np.errstate(divide="ignore", invalid="ignore"):
+            moved = moved[:2] / moved[2]
+        if not np.isfinite(moved).all() or np.abs(moved - corners[:2]).max() > config.register_max_px:
+            continue
+        refined = neighbour.refined(correction)
+        refined_rgb, refined_valid = refined.crop(whole, size if reduced else None)
+        both = mask & refined_valid
+        if not both.any():
+            continue
+        before = float(np.abs(target_grey - grey)[both].mean())
+        after = float(np.abs(target_grey - imaging.intensity(refined_rgb))[both].mean())
+        if after < 0.95 * before:
+            out[-1] = refined
+    return out
 
 
 def _moving_and_better(candidates: list[_Candidate], chosen: np.ndarray, static_error: np.ndarray,

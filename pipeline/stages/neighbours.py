@@ -160,6 +160,18 @@ class WarpedNeighbour:
         warping.blacken(colours, ~valid)
         return colours.reshape(shape + (3,)), valid.reshape(shape)
 
+    def refined(self, other_from_here: np.ndarray) -> WarpedNeighbour:
+        """This neighbour with its warp corrected: the new one's pixel at stabilized point p is this one's pixel at
+        ``other_from_here`` p (a 3x3 transform close to the identity, e.g. a local registration's)."""
+        correction = np.asarray(other_from_here, np.float64)
+        if self.original is not None:
+            return WarpedNeighbour(self.offset, original=self.original, other_from_stab=self.other_from_stab @ correction,
+                                   small_original=self._small_original)
+        warped = warping.warp_frame(self._rgb, correction)
+        valid = ~warped.missing & (warping.warp(self._valid.astype(np.uint8) * 255, correction) == 255)
+        warping.blacken(warped.frame, ~valid)
+        return WarpedNeighbour(self.offset, warped.frame, valid)
+
     def at(self, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(colours (m, 3), valid (m,)) at integer pixels."""
         if self._rgb is not None:
