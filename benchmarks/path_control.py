@@ -28,6 +28,7 @@ DEFAULT_CLIPS = ("sudheerachary_small-shaky-5.avi", "vplab_C.avi", "zhangyilang_
 FFVIZ = (
     ("gaussian, fixed crop (default)", [], None),
     ("gaussian, --crop adaptive", ["--crop", "adaptive"], None),
+    ("gaussian, --crop adaptive --zoom-speed 0.25", ["--crop", "adaptive", "--zoom-speed", "0.25"], None),
     ("gaussian, --smoothness 25", ["--smoothness", "25"], None),
     ("gaussian, --smoothness 75", ["--smoothness", "75"], None),
     ("gaussian, --smoothness t=75,r=100,z=100", ["--smoothness", "t=75,r=100,z=100"], None),
