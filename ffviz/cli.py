@@ -261,7 +261,8 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "less well aligned neighbours contribute more (default: %(default)s)")
     p.add_argument("--quality", choices=presets.QUALITIES, default="default",
                    help="full mode's completion and deblurring effort: default (the thesis's chain) or fast (local "
-                        "warp from two neighbours at half the flow resolution, deblurring over +-3 frames: less CPU "
+                        "warp from two neighbours at half the flow resolution, no local registration, deblurring over "
+                        "+-3 frames: less CPU "
                         "for some PSNR in the filled borders; docs/benchmarks-speed.md) (default: %(default)s)")
     if rrd_folder:
         p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=rrd_default, metavar="DIR",

@@ -1,9 +1,10 @@
 """Named quality presets of a full-frame run (``ffviz stabilize --quality``).
 
 ``default``: the thesis's chain as configured everywhere else (chapter 4's local warp from four neighbours at the
-flow's 640 px working size, deblurring over +-6 frames). ``fast``: the same stages with less of the expensive one,
-motion inpainting (eqs. 24-25): local flow to the two nearest neighbours at a 320 px working size, no mosaic check
-(its moving-content replacement rides on the same flows), deblurring over +-3 frames. What
+flow's 640 px working size, deblurring over +-6 frames). ``fast``: less of the expensive parts, above all motion
+inpainting (eqs. 24-25): local flow to the two nearest neighbours at a 320 px working size, no mosaic check
+(its moving-content replacement rides on the same flows), no local registration of the neighbours before the
+mosaic (ECC per neighbour: the largest stage of a default run), deblurring over +-3 frames. What
 it costs and gives against the default and against mosaic + Telea (OpenCV's chain): docs/benchmarks-speed.md.
 """
 
@@ -23,6 +24,7 @@ def with_quality(config: StabilizeConfig, quality: str) -> StabilizeConfig:
         raise ConfigError(f"quality must be one of {', '.join(QUALITIES)}, not {quality!r}")
     if quality == "default":
         return config
-    completion = dataclasses.replace(config.completion, max_warp_neighbours=2, flow_max_side=320, check_mosaic=False)
+    completion = dataclasses.replace(config.completion, max_warp_neighbours=2, flow_max_side=320, check_mosaic=False,
+                                     register_model=None)
     deblur = dataclasses.replace(config.deblur, radius=min(config.deblur.radius, 3))
     return dataclasses.replace(config, completion=completion, deblur=deblur)

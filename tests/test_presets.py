@@ -19,6 +19,7 @@ def test_default_is_the_config_as_given_and_fast_changes_only_completion_and_deb
     assert (fast.mode, fast.motion, fast.smoothing) == (config.mode, config.motion, config.smoothing)
     assert fast.completion.max_warp_neighbours < config.completion.max_warp_neighbours
     assert fast.completion.flow_max_side < config.completion.flow_max_side
+    assert config.completion.register_model is not None and fast.completion.register_model is None
     assert fast.deblur.radius < config.deblur.radius and fast.deblur.alpha == config.deblur.alpha
     # the completion window still holds every neighbour the deblurring compares
     assert fast.deblur.radius <= fast.completion.radius
