@@ -26,6 +26,7 @@ from pipeline.stages.neighbours import WarpedNeighbour
 from pipeline.results import FrameResult, Stamp
 from pipeline.runtime.observer import Observers, StageCollector
 from pipeline.stages.deblur import DeblurConfig, DeblurResult
+from pipeline.stages.motion import IgnoreRegion, MotionConfig
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 N_FRAMES = 30
@@ -666,19 +667,21 @@ def test_every_result_field_is_recorded_or_marked_not_recorded():
 
 
 def test_every_entity_of_the_field_table_is_in_a_recording(full_run, clip, tmp_path):
-    """The table is what the recorder does: every entity it names is in a full recording (the crop window in a
-    crop-mode one), every timeline it names is used."""
+    """The table is what the recorder does: every entity it names is in a full recording or in a crop-mode one
+    made with the options that add entities (--rolling-shutter, --ignore), every timeline it names is used."""
     from ffviz.recorder import RECORDED_FIELDS, NotRecorded
 
-    crop_rrd = tmp_path / "crop.rrd"
-    stabilize(clip, None, StabilizeConfig(mode="crop"), observer=RerunRecorder(crop_rrd, level="summary"))
+    crop_rrd = tmp_path / "crop.rrd"  # with the options whose results only they record
+    options = StabilizeConfig(mode="crop", rolling_shutter=0.5,
+                              motion=MotionConfig(ignore=(IgnoreRegion(10, 10, 60, 40),)))
+    stabilize(clip, None, options, observer=RerunRecorder(crop_rrd, level="full"))
     entities = set(full_run[0].entities) | set(Recording.load(crop_rrd).entities)
     timelines = {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}
     named = {path for row in RECORDED_FIELDS.values() for target in row.values()
              if not isinstance(target, str) for path in target}
     assert named, "the table names no entity"
-    for path in sorted(named - timelines):
-        assert any(fnmatch.fnmatch(e, path) for e in entities), f"{path} is in the table but not in the recording"
+    missing = [path for path in sorted(named - timelines) if not any(fnmatch.fnmatch(e, path) for e in entities)]
+    assert not missing, f"in the table but not in the recordings: {missing}"
     assert all(timelines <= full_run[0].timelines(e) for e in (ent.OUTPUT_FRAME, ent.INPUT_FRAME))
     assert all(isinstance(t, (tuple, NotRecorded)) or type(t).__name__ == "Nested"
                for row in RECORDED_FIELDS.values() for t in row.values())
