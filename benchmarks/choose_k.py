@@ -45,7 +45,7 @@ def main(argv: list[str]) -> int:
                                            progress=null_progress, total=None)
         row = []
         for k in radii:
-            result = smoothing.smooth(passed.curr_from_prev, smoothing.SmoothingConfig(radius=k), cuts=passed.cuts,
+            result = smoothing.smooth(passed.curr_from_prev, smoothing.SmoothingConfig(radius_frames=k), cuts=passed.cuts,
                                       width=info.width, height=info.height)
             jitter = output_jitter(passed.curr_from_prev, result.orig_from_stab, info.width, info.height, float(info.fps))
             window = warping.largest_crop(result.orig_from_stab, info.width, info.height)

@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"{'scene':34} " + " ".join(f"{m:>12}" for m in METHODS)
           + f" {'vs m+t':>8} {'vs telea':>8} {'kpx/frm':>8} {'s':>6}")
-    full_synthetic = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius=50))
+    full_synthetic = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=50))
     for image, seed in SYNTHETIC:
         video = generate(SyntheticConfig(n_frames=args.frames, jitter_px=10.0, object_sweep=1.3, image=image, seed=seed,
                                          blurred_frames=()))

@@ -51,7 +51,7 @@ def _with(config: StabilizeConfig, completion: CompletionConfig) -> StabilizeCon
 
 
 def psnr_rows(n_frames: int, emit) -> None:
-    synthetic = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius=50))
+    synthetic = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=50))
     cases = [(f"synthetic {image} seed {seed}", lambda config, image=image, seed=seed: completion_scores(
         generate(SyntheticConfig(n_frames=n_frames, jitter_px=10.0, object_sweep=1.3, image=image, seed=seed,
                                  blurred_frames=())), config), synthetic) for image, seed in SYNTHETIC]

@@ -47,7 +47,7 @@ def psnr_rows(n_frames: int) -> list[tuple[str, dict[str, float], dict[str, floa
     for image, seed in SYNTHETIC:
         video = generate(SyntheticConfig(n_frames=n_frames, jitter_px=10.0, object_sweep=1.3, image=image, seed=seed,
                                          blurred_frames=()))
-        base = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius=50))
+        base = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=50))
         cases.append((f"synthetic {image} seed {seed}", lambda config, v=video: completion_scores(v, config), base))
     for name in REAL:
         if not (VIDEOS / name).is_file():

@@ -74,7 +74,7 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
                                        ignore=tuple(parse_ignore(text) for text in getattr(args, "ignore", [])),
                                        ignore_mask=getattr(args, "ignore_mask", None)),
             smoothing=smoothing.SmoothingConfig(
-                radius=args.smoothing_radius, sigma=args.smoothing_sigma,
+                radius_frames=args.smoothing_radius, sigma=args.smoothing_sigma,
                 path="tripod" if getattr(args, "tripod", False) else getattr(args, "path", "gaussian"),
                 horizon_lock=getattr(args, "horizon_lock", False),
                 smoothness=(path_control.Smoothness.parse(args.smoothness)

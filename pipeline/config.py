@@ -37,17 +37,17 @@ class StabilizeConfig:
     @property
     def deblurring(self) -> bool:
         """Whether frames are deblurred from sharper neighbours (chapter 5)."""
-        return self.deblur.enabled and self.deblur.radius > 0
+        return self.deblur.enabled and self.deblur.neighbour_frames > 0
 
     @property
     def completion_frames(self) -> int:
         """Neighbours on each side completion draws on (0 when it does not run)."""
-        return self.completion.radius if self.completing else 0
+        return self.completion.neighbour_frames if self.completing else 0
 
     @property
     def deblur_frames(self) -> int:
         """Neighbours on each side deblurring draws on (0 when it does not run)."""
-        return self.deblur.radius if self.deblurring else 0
+        return self.deblur.neighbour_frames if self.deblurring else 0
 
     @property
     def window_frames(self) -> int:

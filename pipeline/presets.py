@@ -26,5 +26,5 @@ def with_quality(config: StabilizeConfig, quality: str) -> StabilizeConfig:
         return config
     completion = dataclasses.replace(config.completion, max_warp_neighbours=2, flow_max_side=320, check_mosaic=False,
                                      register_model=None)
-    deblur = dataclasses.replace(config.deblur, radius=min(config.deblur.radius, 3))
+    deblur = dataclasses.replace(config.deblur, neighbour_frames=min(config.deblur.neighbour_frames, 3))
     return dataclasses.replace(config, completion=completion, deblur=deblur)

@@ -51,7 +51,7 @@ def test_beats_the_opencv_cpu_chain_on_jittered_crops_of_a_real_clip():
 
 
 def test_beats_the_opencv_cpu_chain_with_a_moving_object_crossing_the_borders():
-    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius=50))
+    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=50))
     runs = []
     for seed in (1, 2):
         video = generate(SyntheticConfig(n_frames=48, jitter_px=10.0, object_sweep=1.3, seed=seed, blurred_frames=()))
@@ -145,7 +145,7 @@ def test_flow_at_reduced_resolution_from_the_downscaled_copies_matches_shrinking
     """At a working resolution below the frame's (1080p in practice, here 640x360 with flow_max_side 320), local
     flow crops of frame t and its neighbours come from each frame's shared downscaled copy: completion quality
     must match the shrink-after-warp path (measured on 1080p scenes: -0.2, -0.01, -0.01 dB)."""
-    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius=50),
+    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=50),
                              completion=completion.CompletionConfig(flow_max_side=320))
     video = generate(SyntheticConfig(n_frames=24, jitter_px=10.0, object_sweep=1.3, seed=2, blurred_frames=()))
     made = []

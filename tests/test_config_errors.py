@@ -23,18 +23,18 @@ REPO = Path(__file__).resolve().parents[1]
 
 # config class -> keyword arguments that each make it invalid
 BAD = {
-    completion.CompletionConfig: [dict(radius=-1), dict(max_warp_neighbours=-1), dict(flow_max_side=8),
+    completion.CompletionConfig: [dict(neighbour_frames=-1), dict(max_warp_neighbours=-1), dict(flow_max_side=8),
                                   dict(residual_radius=-1)],
-    deblur.DeblurConfig: [dict(alpha=0.0), dict(radius=-1), dict(min_ratio=0.5), dict(error_sigma_px=-1.0),
+    deblur.DeblurConfig: [dict(alpha=0.0), dict(neighbour_frames=-1), dict(min_ratio=0.5), dict(error_sigma_px=-1.0),
                           dict(reject_error=0.0), dict(structure_min=2.0), dict(structure_window_px=0)],
-    fmm.MotionInpaintConfig: [dict(radius=0), dict(colour_epsilon=0.0)],
+    fmm.MotionInpaintConfig: [dict(radius_px=0), dict(colour_epsilon=0.0)],
     local_flow.LocalFlowConfig: [dict(method="nope"), dict(dis_preset="nope")],
     metrics.MetricsConfig: [dict(feature="surf"), dict(max_side=8)],
     mosaic.MosaicConfig: [dict(min_neighbours=1), dict(variance_threshold=0.0)],
     motion.MotionConfig: [dict(model="nope"), dict(refine="nope"), dict(ignore=((0, 0, 5, 5),)), dict(hist_step=0)],
     motion.IgnoreRegion: [dict(x=0, y=0, width=0, height=5), dict(x=-1, y=0, width=5, height=5),
                           dict(x=0, y=0, width=5, height=5, start_s=3.0, end_s=1.0)],
-    smoothing.SmoothingConfig: [dict(radius=-1), dict(sigma=0.0), dict(path="nope"), dict(max_shift=-1.0),
+    smoothing.SmoothingConfig: [dict(radius_frames=-1), dict(sigma=0.0), dict(path="nope"), dict(max_shift=-1.0),
                                 dict(max_angle=float("nan")), dict(path="tripod", smoothness=path_control.Smoothness()),
                                 dict(segments=(path_control.PathSegment(0.0, None, "nope"),))],
     path_control.Smoothness: [dict(translation=101.0), dict(zoom=-1.0), dict(rotation=float("nan"))],

@@ -287,7 +287,7 @@ def test_bad_inputs_are_refused():
     with pytest.raises(ValueError, match="neighbour_rgb"):
         inpaint_motion(np.zeros((H, W, 2), np.float32), hole((0, 5, 0, 5)), np.zeros((H, W), np.uint8))
     with pytest.raises(ConfigError):
-        MotionInpaintConfig(radius=0)
+        MotionInpaintConfig(radius_px=0)
     with pytest.raises(ConfigError):
         MotionInpaintConfig(colour_epsilon=0.0)
 

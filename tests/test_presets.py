@@ -13,16 +13,16 @@ from pipeline.stages.smoothing import SmoothingConfig
 
 
 def test_default_is_the_config_as_given_and_fast_changes_only_completion_and_deblurring():
-    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius=12))
+    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=12))
     assert with_quality(config, "default") is config
     fast = with_quality(config, "fast")
     assert (fast.mode, fast.motion, fast.smoothing) == (config.mode, config.motion, config.smoothing)
     assert fast.completion.max_warp_neighbours < config.completion.max_warp_neighbours
     assert fast.completion.flow_max_side < config.completion.flow_max_side
     assert config.completion.register_model is not None and fast.completion.register_model is None
-    assert fast.deblur.radius < config.deblur.radius and fast.deblur.alpha == config.deblur.alpha
+    assert fast.deblur.neighbour_frames < config.deblur.neighbour_frames and fast.deblur.alpha == config.deblur.alpha
     # the completion window still holds every neighbour the deblurring compares
-    assert fast.deblur.radius <= fast.completion.radius
+    assert fast.deblur.neighbour_frames <= fast.completion.neighbour_frames
     with pytest.raises(ConfigError, match="quality must be one of default, fast"):
         with_quality(config, "best")
 

@@ -64,7 +64,7 @@ def smoothed_positions(positions: np.ndarray, config: SmoothingConfig) -> np.nda
 
 def test_translation_path_is_exactly_the_gaussian_filtered_path():
     _, shaky = camera_path(200)
-    config = SmoothingConfig(radius=15)
+    config = SmoothingConfig(radius_frames=15)
     expected = truncated_gaussian_filter(shaky, 15, np.sqrt(15))
     np.testing.assert_allclose(smoothed_positions(shaky, config), expected, atol=1e-6)
 
@@ -74,7 +74,7 @@ def test_removes_high_frequency_jitter_and_follows_the_intended_path(radius):
     # Bound stated: at least 90% of the jitter's energy above 2 Hz removed; the smoothed path stays
     # within 3 px RMS of the intended path, while the shaky one is 4 px RMS (per axis) away.
     intended, shaky = camera_path(300, seed=radius)
-    stabilized = smoothed_positions(shaky, SmoothingConfig(radius=radius))
+    stabilized = smoothed_positions(shaky, SmoothingConfig(radius_frames=radius))
     # Measured on the deviation from the intended path: a pan's ramp would leak over the whole spectrum.
     assert high_frequency_energy(stabilized - intended) < 0.10 * high_frequency_energy(shaky - intended)
     rms_to_intended = np.sqrt(np.mean((stabilized - intended) ** 2))
@@ -86,7 +86,7 @@ def test_no_accumulation_error_each_s_t_depends_only_on_its_window():
     rng = np.random.default_rng(1)
     steps = np.array([geometry.IDENTITY] + [rotation_about(rng.normal(0, 1), 320, 180) @ translation(*rng.normal(0, 5, 2))
                                             for _ in range(99)])
-    config = SmoothingConfig(radius=10)
+    config = SmoothingConfig(radius_frames=10)
     base = smooth(steps, config).orig_from_stab
     perturbed_steps = steps.copy()
     perturbed_steps[20] = rotation_about(10.0, 0, 0) @ translation(50, -30)  # a gross error at one frame
@@ -98,21 +98,21 @@ def test_no_accumulation_error_each_s_t_depends_only_on_its_window():
 
 def test_radius_zero_is_identity_and_sigma_is_settable():
     _, shaky = camera_path(50)
-    result = smooth(inter_frame(shaky), SmoothingConfig(radius=0))
+    result = smooth(inter_frame(shaky), SmoothingConfig(radius_frames=0))
     np.testing.assert_allclose(result.orig_from_stab, np.broadcast_to(np.eye(3), (50, 3, 3)), atol=1e-12)
-    wide = smoothed_positions(shaky, SmoothingConfig(radius=15, sigma=8.0))
+    wide = smoothed_positions(shaky, SmoothingConfig(radius_frames=15, sigma=8.0))
     np.testing.assert_allclose(wide, truncated_gaussian_filter(shaky, 15, 8.0), atol=1e-6)
 
 
 def test_windows_do_not_cross_scene_cuts():
     _, shaky = camera_path(120)
     steps = inter_frame(shaky)
-    result = smooth(steps, SmoothingConfig(radius=10), cuts=[60])
+    result = smooth(steps, SmoothingConfig(radius_frames=10), cuts=[60])
     # Before the cut: same as smoothing the first shot alone; after: same as the second shot alone.
-    first = smooth(steps[:60], SmoothingConfig(radius=10)).orig_from_stab
+    first = smooth(steps[:60], SmoothingConfig(radius_frames=10)).orig_from_stab
     second_steps = steps[60:].copy()
     second_steps[0] = np.eye(3)
-    second = smooth(second_steps, SmoothingConfig(radius=10)).orig_from_stab
+    second = smooth(second_steps, SmoothingConfig(radius_frames=10)).orig_from_stab
     np.testing.assert_allclose(result.orig_from_stab[:60], first, atol=1e-9)
     np.testing.assert_allclose(result.orig_from_stab[60:], second, atol=1e-9)
     assert result.segment_starts == (0, 60)
@@ -120,7 +120,7 @@ def test_windows_do_not_cross_scene_cuts():
 
 def test_trajectories_report_the_camera_path_original_and_smoothed():
     _, shaky = camera_path(100)
-    result = smooth(inter_frame(shaky), SmoothingConfig(radius=15), width=640, height=360)
+    result = smooth(inter_frame(shaky), SmoothingConfig(radius_frames=15), width=640, height=360)
     # Original path: frame t's centre seen in frame 0 is displaced by c_t - c_0.
     np.testing.assert_allclose(result.original_trajectory[:, :2], shaky - shaky[0], atol=1e-6)
     np.testing.assert_allclose(result.smoothed_trajectory[:, :2],
@@ -130,6 +130,6 @@ def test_trajectories_report_the_camera_path_original_and_smoothed():
 
 def test_invalid_config_is_refused():
     with pytest.raises(ValueError):
-        SmoothingConfig(radius=-1)
+        SmoothingConfig(radius_frames=-1)
     with pytest.raises(ValueError):
-        SmoothingConfig(radius=5, sigma=0.0)
+        SmoothingConfig(radius_frames=5, sigma=0.0)

@@ -58,7 +58,7 @@ _MIN_REGISTER_PIXELS = 200  # fewer band pixels than this (at the working resolu
 
 @dataclass(frozen=True)
 class CompletionConfig:
-    radius: int = 6  # neighbours t-r..t+r take part (mosaic and local warp)
+    neighbour_frames: int = 6  # neighbours t-r..t+r take part (mosaic and local warp)
     max_warp_neighbours: int = 4  # local flow is computed for this many neighbours, nearest in time first
     residual_radius: int = 4  # local alignment error: mean over the (2r+1)^2 known pixels around the nearest one
     check_mosaic: bool = True  # let clearly moving local-warp candidates replace mosaic pixels
@@ -95,8 +95,8 @@ class CompletionConfig:
     inpaint: fmm.MotionInpaintConfig = field(default_factory=fmm.MotionInpaintConfig)
 
     def __post_init__(self) -> None:
-        if self.radius < 0:
-            raise ConfigError(f"completion radius must be >= 0, not {self.radius}")
+        if self.neighbour_frames < 0:
+            raise ConfigError(f"completion radius must be >= 0, not {self.neighbour_frames}")
         if self.max_warp_neighbours < 0:
             raise ConfigError(f"max_warp_neighbours must be >= 0, not {self.max_warp_neighbours}")
         if self.flow_max_side is not None and self.flow_max_side < 32:

@@ -71,7 +71,7 @@ MIN_COMMON_FRACTION = 0.2
 class DeblurConfig:
     enabled: bool = True
     alpha: float = DEBLUR_ALPHA  # eq. 31, in intensity units (0..255) of the alignment error E
-    radius: int = 6  # neighbours t-r..t+r are compared (<= the completion radius: their warps are reused)
+    neighbour_frames: int = 6  # neighbours t-r..t+r are compared (<= the completion radius: their warps are reused)
     min_ratio: float = MIN_RATIO  # a neighbour contributes only where b_t / b_t' exceeds this (eq. 31: 1)
     error_sigma_px: float = ERROR_SIGMA_PX  # low-pass of the signed difference before E is taken (0: eq. 29)
     reject_error: float = REJECT_ERROR  # E above this marks another scene (moving object, misregistration)
@@ -82,8 +82,8 @@ class DeblurConfig:
     def __post_init__(self) -> None:
         if not (self.alpha > 0 and math.isfinite(self.alpha)):
             raise ConfigError(f"deblur alpha must be a positive number, not {self.alpha}")
-        if self.radius < 0:
-            raise ConfigError(f"deblur radius must be >= 0, not {self.radius}")
+        if self.neighbour_frames < 0:
+            raise ConfigError(f"deblur radius must be >= 0, not {self.neighbour_frames}")
         if not self.min_ratio >= 1.0:
             raise ConfigError(f"deblur min_ratio must be >= 1 (only sharper neighbours may contribute), "
                              f"not {self.min_ratio}")
@@ -411,14 +411,14 @@ def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, fr
 
     ``output``: frame t in the output's view (``orig_from_view`` maps it to frame t's original pixels);
     ``output_valid``: its pixels with content (None: all); ``frames``: original frames by index, t included
-    (those beyond ``config.radius`` are ignored); ``warped``: neighbours in that view the caller already has
+    (those beyond ``config.neighbour_frames`` are ignored); ``warped``: neighbours in that view the caller already has
     (completion's; reused, not made again). Blurriness is measured on the original frames; only the sharper
     neighbours are warped.
     """
-    frames = {i: rgb for i, rgb in frames.items() if abs(i - t) <= config.radius}
+    frames = {i: rgb for i, rgb in frames.items() if abs(i - t) <= config.neighbour_frames}
     if cache is not None:
         # A few frames of slack: frames are rendered a little out of order on several threads.
-        cache.forget_before(t - config.radius - 8)
+        cache.forget_before(t - config.neighbour_frames - 8)
     measured = window_blurriness(frames, t, curr_from_prev, cache=cache)
     sharper = {o for o, ratio in measured.ratios.items() if ratio > config.min_ratio}
     neighbours = [n for n in warped if n.offset in sharper]

@@ -42,13 +42,13 @@ _WALL = np.int8(3)
 
 @dataclass(frozen=True)
 class MotionInpaintConfig:
-    radius: int = 4  # H(p): known pixels within this distance contribute (see "Radius" above)
+    radius_px: int = 4  # H(p): known pixels within this distance contribute (see "Radius" above)
     colour_epsilon: float = 1.0  # eps in w = 1/(colour distance + eps), RGB 0..255 units
     use_colour: bool = True
 
     def __post_init__(self) -> None:
-        if self.radius < 1:
-            raise ConfigError(f"motion inpainting radius must be >= 1 px, got {self.radius}")
+        if self.radius_px < 1:
+            raise ConfigError(f"motion inpainting radius must be >= 1 px, got {self.radius_px}")
         if not self.colour_epsilon > 0:
             raise ConfigError(f"colour epsilon must be > 0, got {self.colour_epsilon}")
 
@@ -436,14 +436,14 @@ def inpaint_motion(flow: np.ndarray, known: np.ndarray, neighbour_rgb: np.ndarra
         raise ValueError("flow must be finite on known pixels")
     order = np.full(shape, -1, np.int32)
     filled = np.zeros(shape, bool)
-    box = _region_box(known, region, config.radius + 1)
+    box = _region_box(known, region, config.radius_px + 1)
     if box is None:
         return MotionInpaintResult(flow=out_flow, order=order, arrival=arrival, filled=filled)
 
     crop_arrival, visits = _march_box(known, region, box)
     crop_flow = out_flow[box].copy()
     colour = _colour_image(np.ascontiguousarray(neighbour_rgb), valid) if config.use_colour else np.zeros((1, 1, 3), np.float32)
-    off_y, off_x, off_weight = _disc_offsets(config.radius)
+    off_y, off_x, off_weight = _disc_offsets(config.radius_px)
     _inpaint_in_order(crop_flow, known[box].copy(), visits, box[0].start, box[1].start, colour,
                       off_y, off_x, off_weight, float(config.colour_epsilon), bool(config.use_colour))
     crop_order = _order_image(crop_arrival.shape, visits)

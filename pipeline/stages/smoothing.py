@@ -32,7 +32,7 @@ TRIPOD_STILL = 0.05  # px or degrees a frame: a tripod path moving more than thi
 
 @dataclass(frozen=True)
 class SmoothingConfig:
-    radius: int = DEFAULT_RADIUS  # k: neighbours on each side
+    radius_frames: int = DEFAULT_RADIUS  # k (eq. 18): frames on each side of t in N_t
     sigma: float | None = None  # Gaussian sigma in frames; None -> sqrt(k) as in the thesis
     path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/stages/l1_path.py); "tripod": held
     l1: l1_path.L1PathConfig = l1_path.L1PathConfig()  # its bounds, when path is "l1"
@@ -46,8 +46,8 @@ class SmoothingConfig:
     def __post_init__(self) -> None:
         if self.path not in PATHS:
             raise ConfigError(f"smoothing path must be one of {', '.join(PATHS)}, not {self.path!r}")
-        if self.radius < 0:
-            raise ConfigError(f"smoothing radius must be >= 0, not {self.radius}")
+        if self.radius_frames < 0:
+            raise ConfigError(f"smoothing radius must be >= 0, not {self.radius_frames}")
         if self.sigma is not None and self.sigma <= 0:
             raise ConfigError(f"smoothing sigma must be > 0, not {self.sigma}")
         if self.path == "tripod" and self.smoothness is not None:
@@ -63,7 +63,7 @@ class SmoothingConfig:
 
     @property
     def effective_sigma(self) -> float:
-        return self.sigma if self.sigma is not None else max(math.sqrt(self.radius), 1e-6)
+        return self.sigma if self.sigma is not None else max(math.sqrt(self.radius_frames), 1e-6)
 
     def for_segment(self, segment: path_control.PathSegment) -> SmoothingConfig:
         """The setting a segment plans its frames with: its path and smoothness, this config's other values."""
@@ -90,7 +90,7 @@ class SmoothingConfig:
     def label(self) -> str:
         """The setting in the command line's words (for warnings, recordings and figures)."""
         text = self.path + (f":{self.smoothness.label()}" if self.smoothness is not None else "")
-        return text if self.path != "gaussian" or self.smoothness is not None else f"gaussian:k={self.radius}"
+        return text if self.path != "gaussian" or self.smoothness is not None else f"gaussian:k={self.radius_frames}"
 
 
 @dataclass(frozen=True)
@@ -176,7 +176,7 @@ def _plan_range(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: i
         planner = config.l1_planner(max(width, 1), max(height, 1))
         return _l1_path(curr_from_prev, first, last, planner, width, height)
     if config.smoothness is None or config.smoothness.uniform:
-        radius = config.radius if config.smoothness is None else config.smoothness.radius("translation")
+        radius = config.radius_frames if config.smoothness is None else config.smoothness.radius("translation")
         sigma = config.effective_sigma if config.smoothness is None else max(math.sqrt(radius), 1e-6)
         return _gaussian(curr_from_prev, prev_from_curr, first, last, radius, sigma)
     # Per axis: eq. 18 at each axis's radius; the translation run's S_t turned and zoomed about the output centre
