@@ -186,7 +186,9 @@ def test_stabilize_view_streams_live_and_also_saves_the_recording(shaky, tmp_pat
     process = subprocess.Popen([sys.executable, "-m", "ffviz.cli", "stabilize", str(path), "-o", str(out),
                                 "--mode", "none", "--view", "--rrd", str(rrd), "--record", "summary",
                                 "--web-port", str(web), "--grpc-port", str(grpc)],
-                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                               # A job started in the background (CI) inherits SIGINT ignored; a terminal's does not.
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert f"http://127.0.0.1:{web}/" in process.stdout.readline()
         assert _page_served(web, timeout_s=120)
