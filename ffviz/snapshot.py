@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import tempfile
@@ -20,7 +19,7 @@ from pathlib import Path
 
 from ffviz import entities as ent
 from ffviz.blueprint import TAB_ORDER, default_blueprint
-from ffviz.viewer import check_recording, rerun_executable
+from ffviz.viewer import check_recording, rerun_executable, stop_process_group
 from pipeline.errors import ConfigError, InputError
 
 DEFAULT_SIZE = (1280, 800)  # logical points; the PNG is at the viewer's pixel scale
@@ -84,12 +83,7 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
         try:
             png = _drive(ViewerClient, port, viewer, frame, time.monotonic() + timeout_s)
         finally:
-            if viewer.poll() is None:
-                os.killpg(viewer.pid, signal.SIGTERM)
-                try:
-                    viewer.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    os.killpg(viewer.pid, signal.SIGKILL)
+            stop_process_group(viewer)
     if output.suffix.lower() == ".png":
         output.write_bytes(png)
     else:  # JPEG, for docs: a fifth of the PNG's bytes

@@ -98,12 +98,7 @@ def serve(path: Path, *, web_port: int = 9090, grpc_port: int = 9876, native: bo
         return 0
     finally:
         # Whatever ends us (Ctrl-C, SIGTERM via the CLI's handler, an error), the viewer goes too.
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGTERM)
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
+        stop_process_group(process)
 
 
 class LiveViewer:
@@ -132,12 +127,17 @@ class LiveViewer:
             self.stop()
 
     def stop(self) -> None:
-        if self.process.poll() is None:
-            os.killpg(self.process.pid, signal.SIGTERM)
-            try:
-                self.process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.process.pid, signal.SIGKILL)
+        stop_process_group(self.process)
+
+
+def stop_process_group(process: subprocess.Popen, timeout_s: float = 10.0) -> None:
+    """End a viewer started in a session of its own and everything it started: SIGTERM, then SIGKILL."""
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGTERM)
+        try:
+            process.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
 
 
 def _wait_listening(port: int, process: subprocess.Popen, timeout_s: float = 30.0) -> None:
