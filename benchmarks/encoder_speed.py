@@ -126,9 +126,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"{none[1] / med(vidstab)[1]:.2f}x CPU; crop {crop[0] / med(vidstab)[0]:.2f}x wall, "
                       f"{crop[1] / med(vidstab)[1]:.2f}x CPU. Against the transcode (moonshot: <= 1.3x): none "
                       f"{none[0] / med(x264)[0]:.2f}x wall, {none[1] / med(x264)[1]:.2f}x CPU."]
-    if not args.no_report:
-        print(f"wrote {speed_report.write_section('encoding', chr(10).join(lines), args.report)}")
-    print("\n".join(lines))
+    speed_report.publish("encoding", lines, None if args.no_report else args.report)
     return 0
 
 

@@ -135,9 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         fast = speeds["ffviz full --quality fast"]
         lines += ["", f"Fast against the sample: wall {fast[0] / sample[0]:.2f}x, CPU {fast[1] / sample[1]:.2f}x "
                       "(target: wall <= 0.6x)." if sample else "The OpenCV sample is not built here: no ratio."]
-    if not args.no_report:
-        print(f"wrote {speed_report.write_section('fast-preset', chr(10).join(lines), args.report)}")
-    print("\n".join(lines))
+    speed_report.publish("fast-preset", lines, None if args.no_report else args.report)
     return 0
 
 

@@ -106,9 +106,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {name} ({', '.join(f'{k}={v}' for k, v in VARIANTS[name].items()) or 'as shipped'}) "
                      f"| {cells} | {'-' if ok is None else 'yes' if ok else 'no'} |")
     lines += ["", "Noise (px): " + ", ".join(f"{c.name} {noise[c.name]:.3f}" for c in clips) + "."]
-    if not args.no_report:
-        print(f"wrote {speed_report.write_section('motion', chr(10).join(lines), args.report)}")
-    print("\n".join(lines))
+    speed_report.publish("motion", lines, None if args.no_report else args.report)
     return 0
 
 

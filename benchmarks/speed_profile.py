@@ -37,9 +37,7 @@ def main(argv: list[str] | None = None) -> int:
              "(ffviz/bench_profile.py: one worker in process, OpenCV's threads off, after a short warm-up; total: the "
              "run without recording, every thread; recording: a second run's extra CPU with a full .rrd).", "",
              bench_profile.table_header(), *rows]
-    if not args.no_report:
-        print(f"wrote {speed_report.write_section('profile', chr(10).join(lines), args.report)}")
-    print("\n".join(lines))
+    speed_report.publish("profile", lines, None if args.no_report else args.report)
     return 0
 
 

@@ -36,3 +36,10 @@ def write_section(name: str, body: str, report: Path = REPORT) -> Path:
     text = pattern.sub(lambda _: block, text) if marker in text else text.rstrip() + "\n\n" + block
     report.write_text(text.rstrip() + "\n")
     return report
+
+
+def publish(name: str, lines: list[str], report: Path | None) -> None:
+    """Write ``lines`` as section ``name`` of ``report`` (None: write nothing) and print them."""
+    if report is not None:
+        print(f"wrote {write_section(name, chr(10).join(lines), report)}")
+    print("\n".join(lines))
