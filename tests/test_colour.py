@@ -10,6 +10,11 @@ converts exactly), independently of the pipeline's own conversions.
 
 from __future__ import annotations
 
+import dataclasses
+import json
+import shutil
+import subprocess
+
 import av
 import numpy as np
 import pytest
@@ -137,8 +142,9 @@ def test_reader_and_writer_alone_keep_tags_depth_and_colour(clip, tmp_path):
     output = tmp_path / "copy.mp4"
     with video_io.VideoReader(path, keep_depth=True) as reader:
         description = reader.info.colour
-        assert description == ColourDescription(**{**CLIPS[kind][2].__dict__,
-                                                   "pix_fmt": description.pix_fmt})  # read once, as written
+        assert description == ColourDescription(**{**CLIPS[kind][2].__dict__, "pix_fmt": description.pix_fmt,
+                                                   "chroma_location": description.chroma_location})  # as written
+        assert description.chroma_location in ("left", None)  # x264's and x265's default (None: no ffprobe)
         with video_io.VideoWriter(output, like=reader.info) as writer:
             for frame in reader:
                 assert frame.rgb.dtype == (np.float32 if description.deep else np.uint8)
@@ -273,3 +279,132 @@ def test_float32_frames_take_every_full_mode_stage_as_uint8_frames_do():
     # uint8 rounding alone leaves a median of 0.25 (measured 0.25); a few pixels take another source where a choice
     # sits on its threshold (measured: 1.1% of the samples more than a level apart)
     assert np.median(difference) < 0.3 and (difference > 1).mean() < 0.02, (np.median(difference), difference.max())
+
+
+# ------------------------------------------------------------------------------------------------ chroma location
+
+needs_ffmpeg = pytest.mark.skipif(shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None,
+                                  reason="the system ffmpeg and ffprobe make and read chroma-located clips")
+
+
+def ffprobe_chroma_location(path) -> str:
+    result = subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-show_entries",
+                             "stream=chroma_location", "-of", "json", str(path)], capture_output=True, text=True,
+                            check=True)
+    return json.loads(result.stdout)["streams"][0]["chroma_location"]
+
+
+def make_ffmpeg_clip(path, codec: str, location: str) -> None:
+    """The shaky scene encoded by the system ffmpeg (its own RGB -> Y'CbCr, BT.709 limited range), its chroma
+    location tagged with ``-chroma_sample_location``: 8-bit H.264 or 10-bit HEVC."""
+    deep = codec == "libx265"
+    frames = np.stack([scene(t) for t in range(N)])
+    raw = (np.round(frames * 257).astype("<u2") if deep else np.round(frames).astype(np.uint8)).tobytes()
+    command = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb48le" if deep else "rgb24",
+               "-s", f"{W}x{H}", "-r", "25", "-i", "-", "-vf", "scale=out_color_matrix=bt709:out_range=tv",
+               "-c:v", codec, "-crf", "8", "-pix_fmt", "yuv420p10le" if deep else "yuv420p",
+               "-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "bt709", "-color_range", "tv",
+               "-chroma_sample_location", location, str(path)]
+    if deep:
+        command[-1:-1] = ["-x265-params", "log-level=error"]
+    subprocess.run(command, input=raw, check=True, capture_output=True)
+
+
+@pytest.fixture(scope="module", params=[(codec, location) for codec in ("libx264", "libx265")
+                                        for location in ("left", "center", "topleft")],
+                ids=lambda p: f"{'h264_8bit' if p[0] == 'libx264' else 'hevc_10bit'}_{p[1]}")
+def located_clip(request, tmp_path_factory):
+    if shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None:
+        pytest.skip("the system ffmpeg and ffprobe make and read chroma-located clips")
+    codec, location = request.param
+    path = tmp_path_factory.mktemp("chroma") / f"{codec}_{location}.mp4"
+    make_ffmpeg_clip(path, codec, location)
+    assert ffprobe_chroma_location(path) == location
+    return location, path
+
+
+@pytest.mark.parametrize("mode", ["none", "crop", "full"])
+def test_every_mode_keeps_the_chroma_location(located_clip, mode, tmp_path, capsys):
+    location, path = located_clip
+    assert video_io.probe_video(path).colour.chroma_location == location
+    output = tmp_path / f"{mode}.mp4"
+    assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", mode]) == 0
+    assert ffprobe_chroma_location(output) == location
+    assert_faithful(path, output, location)
+    assert "warning" not in capsys.readouterr().err.lower()
+
+
+@needs_ffmpeg
+def test_mkv_output_carries_the_chroma_location_in_the_container(tmp_path):
+    """MKV has a field of its own (ChromaSitingHorz/Vert), written from the codec context: with mpeg4, whose
+    bitstream has none, it is the only place the location is kept. Matroska IDs 0x55B7 / 0x55B8, value 2 / 1:
+    horizontally half-way, vertically at the top (center would be 2 / 2)."""
+    path = tmp_path / "topleft.mp4"
+    make_ffmpeg_clip(path, "libx264", "topleft")
+    output = tmp_path / "out.mkv"
+    assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", "none", "--codec", "mpeg4"]) == 0
+    header = output.read_bytes()[:4096]
+    assert b"\x55\xb7\x81\x01" in header and b"\x55\xb8\x81\x01" in header  # left: 1 / 1 (Matroska's enum)
+
+
+@pytest.mark.parametrize("depth", [8, 10])
+@pytest.mark.parametrize("location", ["left", "center", "topleft", "bottom"])
+def test_chroma_is_interpolated_and_subsampled_at_its_location(location, depth):
+    """Chroma planes that are linear ramps (Cb across, Cr down; in gamut), read as sited: each pixel's Cb and Cr
+    are the ramps' values at that pixel, from where the samples sit. Written back from those pixels, the samples
+    come out as they were. Read as sited elsewhere (left, what an unknown location means), they are off."""
+    width, height, s = 64, 48, 2 ** (depth - 8)
+    pix_fmt = "yuv420p" if depth == 8 else "yuv420p10le"
+    dtype = np.uint8 if depth == 8 else np.uint16
+    site_x, site_y = colours._CHROMA_SITES[location]
+    cb_of, cr_of = (lambda i, j: (80 + 3 * j) * s), (lambda i, j: (90 + 4 * i) * s)
+    frame = av.VideoFrame(width, height, pix_fmt)
+    for plane, values in zip(frame.planes, (lambda i, j: 126 * s + 0 * i, cb_of, cr_of)):
+        i, j = np.mgrid[0:plane.height, 0:plane.width]
+        np.frombuffer(plane, dtype).reshape(plane.height, -1)[:, :plane.width] = np.round(values(i, j))
+    colour = ColourDescription(matrix=1, range=1, bit_depth=depth, pix_fmt=pix_fmt, chroma_location=location)
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    expected_cb, expected_cr = cb_of((y - site_y) / 2, (x - site_x) / 2), cr_of((y - site_y) / 2, (x - site_x) / 2)
+    inside = (slice(4, height - 4), slice(4, width - 4))  # away from the edges, where the ramps are held
+
+    def chroma_error(as_colour) -> float:
+        """Mean |error| of Cb and Cr, in levels of the video's depth, over the inside."""
+        rgb = colours.to_rgb(frame, as_colour, width, height, deep=True).astype(np.float64)
+        encode, _ = colours._yuv_affine(as_colour, depth)
+        ycc = rgb @ encode[:, :3].T.astype(np.float64) + encode[:, 3]
+        return max(np.abs(ycc[..., 1] - expected_cb)[inside].mean(), np.abs(ycc[..., 2] - expected_cr)[inside].mean())
+
+    # 8 bits: uint8 RGB's rounding alone leaves ~0.1 level; 10 bits travel as float32
+    assert chroma_error(colour) < (0.2 if depth == 8 else 0.02)
+    if location != "left":  # half a luma pixel of a 1.5 (Cb) or 2 (Cr) levels a pixel ramp
+        assert chroma_error(dataclasses.replace(colour, chroma_location=None)) > 0.6 * s
+    # and written back at the same sites, from full-resolution RGB that carries the ramps exactly
+    _, decode = colours._yuv_affine(colour, depth)
+    rgb = np.stack([np.full((height, width), 126.0 * s), expected_cb, expected_cr], -1) @ decode[:, :3].T + decode[:, 3]
+    written = colours.from_rgb(rgb.astype(np.float32), colour, pix_fmt)
+    planes = [np.frombuffer(p, dtype).reshape(p.height, -1)[:, :p.width].astype(np.float64) for p in written.planes]
+    i, j = np.mgrid[0:height // 2, 0:width // 2]
+    assert np.abs(planes[1] - np.round(cb_of(i, j)))[2:-2, 2:-2].max() <= 1
+    assert np.abs(planes[2] - np.round(cr_of(i, j)))[2:-2, 2:-2].max() <= 1
+
+
+def test_without_ffprobe_the_chroma_location_is_unknown_and_the_job_runs(tmp_path, monkeypatch, capsys):
+    """A clean setup has no system ffmpeg: the location is unknown (said so in the description), the frames are
+    read as sited left, and the output is written as before. An ffprobe that fails is the same."""
+    path = tmp_path / "bt709.mp4"
+    make_clip(path, "bt709")
+    for fake_ffprobe in (None, "#!/bin/sh\nexit 1\n"):
+        bin_dir = tmp_path / f"bin{fake_ffprobe is None}"
+        bin_dir.mkdir()
+        if fake_ffprobe is not None:
+            (bin_dir / "ffprobe").write_text(fake_ffprobe)
+            (bin_dir / "ffprobe").chmod(0o755)
+        monkeypatch.setenv("PATH", str(bin_dir))
+        info = video_io.probe_video(path)
+        assert info.colour.chroma_location is None
+        assert info.colour.summary().endswith("8-bit, chroma location unknown")
+        output = tmp_path / f"out{fake_ffprobe is None}.mp4"
+        assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", "none"]) == 0
+        assert "warning" not in capsys.readouterr().err.lower()
+        monkeypatch.undo()
+        assert_faithful(path, output, "bt709")

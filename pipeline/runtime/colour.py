@@ -7,13 +7,20 @@ Primaries and transfer are not converted: the pipeline works on the input's RGB 
 
 Depth: 8-bit video travels as uint8 RGB; deeper video (10/12 bits) as float32 RGB on the same 0..255 scale
 (fractions of a level carry the extra bits), so every threshold in intensity units means the same at any depth.
-``display_rgb`` turns either into 8-bit BT.709 display RGB (HDR tone-mapped) for people to look at.
-Chroma location is not exposed by PyAV 18: written as 'left' (type 0, the H.264/HEVC default).
+``display_rgb`` turns either into 8-bit BT.709 display RGB (HDR tone-mapped: BT.2390 EETF) for people to look at.
+Chroma location (where 4:2:0's chroma samples sit) is not exposed by PyAV 18: read by ffprobe when it is on PATH
+(``probe_chroma_location``; unknown without it, and then nothing is written, as before), honoured by the 4:2:0
+conversions and written back (x264/x265 ``chromaloc``, and the codec context's field, which MKV also carries).
 """
 
 from __future__ import annotations
 
+import functools
+import json
+import os
+import shutil
 import struct
+import subprocess
 from dataclasses import dataclass
 
 import av
@@ -37,8 +44,9 @@ PQ, HLG = 16, 18
 # AVColorSpace -> the swscale matrix PyAV's reformat takes (SWS_CS_*); anything else is converted as BT.601,
 # FFmpeg's default for untagged video, and tagged so.
 _SWS_MATRIX = {1: 1, 4: 4, 5: 5, 6: 5, 7: 7, 9: 9, 10: 9}
-# Planar 4:2:0 (nearly all video) is converted here, exactly (from_rgb, _yuv420_to_rgb); other layouts by swscale
-# with these flags. Measured on a smooth colour image: swscale's defaults read 8-bit BT.709 limited range ~1.2
+# Planar 4:2:0 (nearly all video) is converted here, exactly and at its chroma location (from_rgb, _yuv420_to_rgb):
+# swscale with these flags takes chroma as sited at the centre (measured on ramps: 0.51, 0.49 luma px), half a pixel
+# right of H.264/HEVC's default, and PyAV cannot tell it otherwise. Other layouts go through swscale with these flags. Measured on a smooth colour image: swscale's defaults read 8-bit BT.709 limited range ~1.2
 # levels dark (these flags: 0.0); its 10-bit paths are ~0.4% off in gain both ways, and full chroma interpolation
 # misreads 10-bit input, so it is for 8 bits only.
 _FLAGS_8 = Interpolation.BILINEAR | Interpolation.ACCURATE_RND | Interpolation.FULL_CHR_H_INT | \
@@ -47,6 +55,11 @@ _FLAGS_DEEP = Interpolation.BICUBIC | Interpolation.ACCURATE_RND
 _KR_KB = {1: (0.2126, 0.0722), 4: (0.30, 0.11), 5: (0.299, 0.114), 6: (0.299, 0.114), 7: (0.212, 0.087),
           9: (0.2627, 0.0593), 10: (0.2627, 0.0593)}  # luma weights of R and B per matrix (ITU-T H.273)
 _DEPTHS = {"yuv420p": 8, "yuvj420p": 8, "yuv420p10le": 10, "yuv420p12le": 12}
+# FFmpeg's chroma location names -> H.264/HEVC chroma_sample_loc_type (x264/x265 ``chromaloc``), and where the
+# chroma sample of each 2x2 block sits, in luma pixels right and down of its top-left pixel.
+CHROMA_LOCATIONS = {"left": 0, "center": 1, "topleft": 2, "top": 3, "bottomleft": 4, "bottom": 5}
+_CHROMA_SITES = {"left": (0.0, 0.5), "center": (0.5, 0.5), "topleft": (0.0, 0.0), "top": (0.5, 0.0),
+                 "bottomleft": (0.0, 1.0), "bottom": (0.5, 1.0)}
 
 
 @dataclass(frozen=True)
@@ -63,6 +76,7 @@ class ColourDescription:
     mastering: tuple[tuple[float, float], ...] | None = None  # R, G, B, white (x, y); (min, max) cd/m2 last
     content_light: tuple[int, int] | None = None  # MaxCLL, MaxFALL (cd/m2)
     dynamic_metadata: str | None = None  # "Dolby Vision" / "HDR10+" per-scene metadata, which is not carried over
+    chroma_location: str | None = None  # CHROMA_LOCATIONS name (ffprobe's); None: unknown, converted as "left"
 
     @property
     def deep(self) -> bool:
@@ -91,7 +105,15 @@ class ColourDescription:
             text += f", mastering display {self.mastering[-1][0]:g}-{self.mastering[-1][1]:g} cd/m2"
         if self.content_light is not None:
             text += f", MaxCLL {self.content_light[0]}, MaxFALL {self.content_light[1]}"
+        if self.chroma == "4:2:0":
+            text += f", chroma {self.chroma_location or 'location unknown'}"
         return text
+
+    def chroma_params(self) -> list[str]:
+        """x264's and x265's setting that writes the chroma location into the stream (empty when unknown)."""
+        if self.chroma_location not in CHROMA_LOCATIONS:
+            return []
+        return [f"chromaloc={CHROMA_LOCATIONS[self.chroma_location]}"]
 
     def x265_hdr_params(self) -> list[str]:
         """x265's master-display and max-cll settings that carry the input's HDR metadata (empty without it)."""
@@ -138,11 +160,37 @@ def describe(frame: av.VideoFrame) -> ColourDescription:
                              mastering=mastering, content_light=content_light, dynamic_metadata=dynamic)
 
 
+def probe_chroma_location(path: str | os.PathLike[str], stream_index: int) -> str | None:
+    """The stream's chroma location as ffprobe names it (a CHROMA_LOCATIONS key), or None where it is unspecified,
+    ffprobe is not on PATH, or it fails: PyAV 18 exposes the field nowhere (frame, stream, codec context). Cached
+    per file version, so the readers a run opens start ffprobe once."""
+    ffprobe = shutil.which("ffprobe")
+    try:
+        stat = os.stat(path)
+    except OSError:
+        return None
+    if ffprobe is None:
+        return None
+    return _probe_chroma_location(ffprobe, os.fspath(path), stream_index, stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=64)
+def _probe_chroma_location(ffprobe: str, path: str, stream_index: int, size: int, mtime_ns: int) -> str | None:
+    try:
+        result = subprocess.run([ffprobe, "-v", "error", "-select_streams", str(stream_index), "-show_entries",
+                                 "stream=chroma_location", "-of", "json", path],
+                                capture_output=True, text=True, timeout=30, check=True)
+        streams = json.loads(result.stdout).get("streams") or [{}]
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return None
+    location = streams[0].get("chroma_location")
+    return location if location in CHROMA_LOCATIONS else None
+
+
 def to_rgb(frame: av.VideoFrame, colour: ColourDescription, width: int, height: int, *, deep: bool) -> np.ndarray:
     """(height, width, 3) RGB of a decoded picture by the video's matrix and range: uint8, or with ``deep`` (and
     more than 8 bits in the video) float32 on the 0..255 scale."""
-    if frame.format.name in _DEPTHS and (colour.deep or colour.range == FULL) and \
-            (frame.width, frame.height) == (width, height):
+    if frame.format.name in _DEPTHS and (frame.width, frame.height) == (width, height):
         rgb = _yuv420_to_rgb(frame, colour)
         if deep and colour.deep:
             return rgb
@@ -158,17 +206,9 @@ def to_rgb(frame: av.VideoFrame, colour: ColourDescription, width: int, height: 
 def from_rgb(rgb: np.ndarray, colour: ColourDescription, pix_fmt: str) -> av.VideoFrame:
     """A 4:2:0 picture in ``pix_fmt`` (yuv420p, yuv420p10le, yuv420p12le; even sizes) from RGB (uint8, or float32 on
     the 0..255 scale), by the video's matrix and range (exactly, rounded), tagged with its description. Chroma of
-    each 2x2 block is sited left (MPEG-2/H.264's default): [1 2 1] / 4 across, the two rows averaged. 8-bit limited
-    range goes through swscale (as exact with these flags, and faster)."""
-    depth = _DEPTHS[pix_fmt]
-    if depth == 8 and colour.range == LIMITED:
-        if rgb.dtype != np.uint8:
-            rgb = np.clip(np.asarray(rgb, np.float32) + np.float32(0.5), 0, 255).astype(np.uint8)
-        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24").reformat(
-            format=pix_fmt, dst_colorspace=_SWS_MATRIX[colour.matrix], dst_color_range=colour.range,
-            interpolation=_FLAGS_8)
-    else:
-        frame = _rgb_to_yuv420(np.asarray(rgb, np.float32), colour, pix_fmt, depth)
+    each 2x2 block is taken at its chroma location (unknown: left, MPEG-2/H.264's default): [1 2 1] / 4 centred on
+    a pixel, [1 1] / 2 between two."""
+    frame = _rgb_to_yuv420(np.asarray(rgb, np.float32), colour, pix_fmt, _DEPTHS[pix_fmt])
     frame.colorspace, frame.color_range = colour.matrix, colour.range
     frame.color_primaries, frame.color_trc = colour.primaries, colour.transfer
     return frame
@@ -177,8 +217,12 @@ def from_rgb(rgb: np.ndarray, colour: ColourDescription, pix_fmt: str) -> av.Vid
 def _rgb_to_yuv420(rgb: np.ndarray, colour: ColourDescription, pix_fmt: str, depth: int) -> av.VideoFrame:
     encode, _ = _yuv_affine(colour, depth)
     luma = cv2.transform(rgb, encode[:1])
-    # the block's filter, kept at its top-left pixel and picked out by a nearest-neighbour halving
-    blocks = cv2.sepFilter2D(rgb, cv2.CV_32F, _ROW_KERNEL, _COLUMN_KERNEL, anchor=(1, 0),
+    # the block's filter, centred on its chroma sample, kept at its top-left pixel and picked out by a
+    # nearest-neighbour halving
+    site_x, site_y = _CHROMA_SITES.get(colour.chroma_location, _CHROMA_SITES["left"])
+    across, anchor_x = _SITE_KERNELS[site_x]
+    down, anchor_y = _SITE_KERNELS[site_y]
+    blocks = cv2.sepFilter2D(rgb, cv2.CV_32F, across, down, anchor=(anchor_x, anchor_y),
                              borderType=cv2.BORDER_REPLICATE)
     blocks = cv2.resize(blocks, (rgb.shape[1] // 2, rgb.shape[0] // 2), interpolation=cv2.INTER_NEAREST)
     chroma = cv2.transform(blocks, encode[1:])
@@ -190,8 +234,10 @@ def _rgb_to_yuv420(rgb: np.ndarray, colour: ColourDescription, pix_fmt: str, dep
     return frame
 
 
-_ROW_KERNEL = np.array([0.25, 0.5, 0.25], np.float32)  # across: the chroma sample sits on the left pixel
-_COLUMN_KERNEL = np.array([0.5, 0.5], np.float32)  # down: between the two rows
+# chroma sample's offset in the block (luma pixels) -> (kernel, anchor) that centres the filter on it
+_SITE_KERNELS = {0.0: (np.array([0.25, 0.5, 0.25], np.float32), 1),  # on the first pixel (and its neighbours)
+                 0.5: (np.array([0.5, 0.5], np.float32), 0),  # between the block's two pixels
+                 1.0: (np.array([0.25, 0.5, 0.25], np.float32), 0)}  # on the second pixel
 
 
 def _yuv_affine(colour: ColourDescription, depth: int) -> tuple[np.ndarray, np.ndarray]:
@@ -215,15 +261,18 @@ def _yuv_affine(colour: ColourDescription, depth: int) -> tuple[np.ndarray, np.n
 
 def _yuv420_to_rgb(frame: av.VideoFrame, colour: ColourDescription) -> np.ndarray:
     """RGB float32 (0..255) of a planar 4:2:0 picture, exactly by the matrix and range (swscale's 10-bit paths are
-    ~0.4% off in gain both ways, its 8-bit full range half a level off in chroma). Chroma is interpolated as
-    sited: left, between two rows (as from_rgb writes it)."""
+    ~0.4% off in gain both ways, its 8-bit full range half a level off in chroma). Chroma is interpolated
+    bilinearly from where it is sited (its chroma location; unknown: left, between two rows), as from_rgb writes
+    it."""
     depth = _DEPTHS[frame.format.name]
     dtype = np.uint8 if depth == 8 else np.uint16
     luma, cb, cr = (np.frombuffer(p, dtype).reshape(p.height, -1)[:, :p.width] for p in frame.planes)
     height, width = luma.shape
-    # chroma sample (i, j) sits at luma (2i, 2j + 0.5): bilinear at (x / 2, y / 2 - 0.25), edges repeated
+    # chroma sample (i, j) sits at luma (x, y) = (2j + site_x, 2i + site_y): bilinear at ((x - site_x) / 2,
+    # (y - site_y) / 2), edges repeated
+    site_x, site_y = _CHROMA_SITES.get(colour.chroma_location, _CHROMA_SITES["left"])
     chroma = cv2.merge([cb.astype(np.float32), cr.astype(np.float32)])
-    chroma = cv2.warpAffine(chroma, np.array([[0.5, 0, 0], [0, 0.5, -0.25]]), (width, height),
+    chroma = cv2.warpAffine(chroma, np.array([[0.5, 0, -site_x / 2], [0, 0.5, -site_y / 2]]), (width, height),
                             flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
     _, decode = _yuv_affine(colour, depth)
     rgb = cv2.transform(cv2.merge([luma.astype(np.float32), chroma]), decode)
@@ -231,11 +280,20 @@ def _yuv420_to_rgb(frame: av.VideoFrame, colour: ColourDescription) -> np.ndarra
 
 
 def tag_stream(context: av.codec.context.CodecContext, colour: ColourDescription) -> None:
-    """The encoder writes the description into the stream (VUI: matrix, range, primaries, transfer)."""
+    """The encoder writes the description into the stream (VUI: matrix, range, primaries, transfer). The chroma
+    location has no field in PyAV: ``encoder_options`` sets it."""
     context.colorspace = colour.matrix
     context.color_range = colour.range
     context.color_primaries = colour.primaries
     context.color_trc = colour.transfer
+
+
+def encoder_options(colour: ColourDescription) -> dict[str, str]:
+    """Codec context options for the description's chroma location (the AVOption ``chroma_sample_location``,
+    which the muxer copies into MKV's chroma siting), or none when it is unknown."""
+    if colour.chroma_location not in CHROMA_LOCATIONS:
+        return {}
+    return {"chroma_sample_location": colour.chroma_location}
 
 
 # ------------------------------------------------------------------------------------------------ display

@@ -334,7 +334,8 @@ def probe_video(path: str | os.PathLike[str]) -> VideoInfo:
             has_audio=bool(container.streams.audio),
             codec=stream.codec_context.name,
             time_base=Fraction(time_base) if time_base else Fraction(1, 1) / fps,
-            colour=colours.describe(first),
+            colour=dataclasses.replace(colours.describe(first),
+                                       chroma_location=colours.probe_chroma_location(path, stream.index)),
         )
 
 
@@ -776,9 +777,11 @@ class VideoWriter:
         depth = min(max(colour.bit_depth, 8), _MAX_DEPTH[codec])
         if depth in (9, 11):
             depth += 1
-        options = encoding.stream_options(colour.bit_depth)
+        options = {**encoding.stream_options(colour.bit_depth), **colours.encoder_options(colour)}
         if codec == "hevc":
-            options["x265-params"] = ":".join(["log-level=error", *colour.x265_hdr_params()])
+            options["x265-params"] = ":".join(["log-level=error", *colour.x265_hdr_params(), *colour.chroma_params()])
+        elif codec == "h264" and colour.chroma_params():
+            options["x264-params"] = ":".join(colour.chroma_params())
         if depth < colour.bit_depth:
             self.warnings.append(f"{codec} cannot store {colour.bit_depth}-bit video: written at {depth} bits, with "
                                  f"the input's colour tags ({colour.summary()}); --codec hevc keeps up to 12")
