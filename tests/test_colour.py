@@ -211,21 +211,69 @@ def test_422_input_is_written_420_with_one_warning_line_and_its_tags_and_depth(t
     assert (tags["matrix"], tags["range"], tags["primaries"], tags["transfer"], tags["depth"]) == (1, 1, 1, 1, 10)
 
 
+def test_pq_and_hlg_curves_give_bt2100_and_bt2408_reference_levels():
+    """BT.2408's reference levels: HDR reference white (203 cd/m2) at PQ 58% and, on the 1000 cd/m2 reference
+    display, HLG 75% (inverse OETF, then the OOTF's 1000 Ys^1.2); PQ 75% is 1000 cd/m2, PQ 1.0 10000."""
+    assert abs(colours.nits_to_pq(203) - 0.5807) < 1e-3 and abs(colours.nits_to_pq(1000) - 0.7518) < 1e-3
+    nits = np.array([0.01, 1, 100, 203, 1000, 10000])
+    assert np.allclose(colours.pq_to_nits(colours.nits_to_pq(nits)), nits, rtol=1e-6)
+    assert colours.pq_to_nits(np.array(1.0)) == pytest.approx(10000)
+    assert colours.hlg_to_scene(np.array(0.5)) == pytest.approx(1 / 12) and colours.hlg_to_scene(1.0) == pytest.approx(1)
+    assert 1000 * colours.hlg_to_scene(np.array(0.75)) ** 1.2 == pytest.approx(203, abs=1.5)
+
+
+@pytest.mark.parametrize("source_peak", [400.0, 1000.0, 4000.0])
+def test_bt2390_eetf_keeps_what_fits_and_compresses_the_rest_without_clipping(source_peak):
+    """Report ITU-R BT.2390's EETF, source peak -> 203 cd/m2: light below the knee unchanged, the source peak at
+    the target peak exactly, monotonic with no clipping below it, continuous with slope 1 at the knee."""
+    target = colours.SDR_WHITE_NITS
+    source_pq = colours.nits_to_pq(source_peak)
+    codes = np.linspace(0, source_pq, 2001)
+    mapped = colours.bt2390_eetf(codes, source_peak, target)
+    assert np.all(np.diff(mapped) > 0)  # strictly increasing: nothing below the source peak is clipped
+    assert colours.pq_to_nits(mapped[-1]) == pytest.approx(target, rel=1e-9)
+    assert np.all(colours.pq_to_nits(mapped[:-1]) < target)
+    knee = (1.5 * colours.nits_to_pq(target) / source_pq - 0.5) * source_pq
+    below = codes < knee
+    assert below.sum() > 100 and np.allclose(mapped[below], codes[below], rtol=1e-12, atol=0)  # untouched
+    eps = 1e-6
+    slope = (colours.bt2390_eetf(np.array(knee + eps), source_peak, target) - (knee - eps)) / (2 * eps)
+    assert slope == pytest.approx(1, abs=1e-4)
+    assert colours.bt2390_eetf(np.array(1.0), source_peak, target) == pytest.approx(colours.nits_to_pq(target))
+    # a video that fits the target is left as it is
+    assert np.allclose(colours.bt2390_eetf(codes[:50], 150, target), codes[:50], rtol=1e-12, atol=0)
+
+
+def grey(code: float, colour: ColourDescription) -> int:
+    shown = colours.display_rgb(np.full((2, 2, 3), code * 255, np.float32), colour)[0, 0]
+    assert len(set(shown.tolist())) == 1  # a grey stays grey
+    return int(shown[0])
+
+
 def test_display_rgb_shows_hdr_white_near_sdr_white_and_leaves_sdr_alone():
     sdr = ColourDescription(matrix=1, primaries=1, transfer=1)
     frame = scene(0)
     assert np.array_equal(colours.display_rgb(np.round(frame).astype(np.uint8), sdr), np.round(frame).astype(np.uint8))
-    # HDR reference white (203 cd/m2): PQ code 0.5807, HLG 0.75; a grey stays grey, near SDR white, not clipped
-    for transfer, code in ((16, 0.5807), (18, 0.75)):
-        hdr = ColourDescription(matrix=9, primaries=9, transfer=transfer, bit_depth=10)
-        white = colours.display_rgb(np.full((2, 2, 3), code * 255, np.float32), hdr)[0, 0]
-        assert len(set(white.tolist())) == 1 and 235 <= white[0] < 255
-        # brighter content is brighter still, up to white
-        peak = colours.display_rgb(np.full((2, 2, 3), 255, np.float32), hdr)[0, 0]
-        assert peak[0] > white[0]
+    pq = ColourDescription(matrix=9, primaries=9, transfer=16, bit_depth=10)
+    hlg = ColourDescription(matrix=9, primaries=9, transfer=18, bit_depth=10)
+    # 100 cd/m2 is below the knee: shown exactly as its light relative to SDR white (203), BT.1886-encoded
+    hundred = grey(colours.nits_to_pq(100), pq)
+    assert abs(hundred - 255 * (colours.pq_to_nits(colours.bt2390_eetf(colours.nits_to_pq(100), 1000, 203)) / 203)
+               ** (1 / 2.4)) <= 0.5 and abs(hundred - 255 * (100 / 203) ** (1 / 2.4)) <= 1.5
+    # HDR reference white (PQ 58%, HLG 75%) near SDR white, and the same from either transfer
+    white = grey(colours.nits_to_pq(203), pq)
+    assert 0.9 * 255 <= white < 255 and abs(grey(0.75, hlg) - white) <= 1
+    # the whole range of codes, dark to peak: never darker for a brighter code, white at the peak
+    for colour in (pq, hlg):
+        ramp = colours.display_rgb(np.linspace(0, 255, 1024, dtype=np.float32)[:, None, None].repeat(3, 2), colour)
+        assert np.all(np.diff(ramp[:, 0, 0].astype(int)) >= 0) and ramp[-1, 0, 0] == 255 and ramp[0, 0, 0] == 0
+    # highlights below the video's peak are not clipped: 1000 cd/m2 is white for a 1000 cd/m2 video (the default
+    # peak) and still below white, and above 500 cd/m2, for one whose MaxCLL says 4000
+    bright = dataclasses.replace(pq, content_light=(4000, 400))
+    assert grey(colours.nits_to_pq(1000), pq) == 255
+    assert grey(colours.nits_to_pq(500), bright) < grey(colours.nits_to_pq(1000), bright) < 255
     # BT.2020's saturated red lies outside BT.709: shown as BT.709's most saturated red, not a dull one
-    red = colours.display_rgb(np.array([[[0.75 * 255, 0, 0]]], np.float32),
-                              ColourDescription(matrix=9, primaries=9, transfer=18, bit_depth=10))[0, 0]
+    red = colours.display_rgb(np.array([[[0.75 * 255, 0, 0]]], np.float32), hlg)[0, 0]
     assert red[0] > 200 and red[1] == 0 and red[2] == 0
 
 
@@ -337,14 +385,14 @@ def test_every_mode_keeps_the_chroma_location(located_clip, mode, tmp_path, caps
 @needs_ffmpeg
 def test_mkv_output_carries_the_chroma_location_in_the_container(tmp_path):
     """MKV has a field of its own (ChromaSitingHorz/Vert), written from the codec context: with mpeg4, whose
-    bitstream has none, it is the only place the location is kept. Matroska IDs 0x55B7 / 0x55B8, value 2 / 1:
-    horizontally half-way, vertically at the top (center would be 2 / 2)."""
+    bitstream has none, it is the only place the location is kept. Matroska's ChromaSitingHorz / Vert (IDs
+    0x55B7 / 0x55B8): topleft is 1 / 1, sited on the top-left pixel (left would be 1 / 2, center 2 / 2)."""
     path = tmp_path / "topleft.mp4"
     make_ffmpeg_clip(path, "libx264", "topleft")
     output = tmp_path / "out.mkv"
     assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", "none", "--codec", "mpeg4"]) == 0
     header = output.read_bytes()[:4096]
-    assert b"\x55\xb7\x81\x01" in header and b"\x55\xb8\x81\x01" in header  # left: 1 / 1 (Matroska's enum)
+    assert b"\x55\xb7\x81\x01" in header and b"\x55\xb8\x81\x01" in header
 
 
 @pytest.mark.parametrize("depth", [8, 10])

@@ -297,58 +297,118 @@ def encoder_options(colour: ColourDescription) -> dict[str, str]:
 
 
 # ------------------------------------------------------------------------------------------------ display
+#
+# HDR shown on an SDR screen (ITU-R BT.2408): HDR reference white (203 cd/m2) is SDR's white, so display light is
+# taken relative to it, and brighter light is compressed towards it by the BT.2390 EETF (Report ITU-R BT.2390,
+# 5.4.1; BT.2408 3.1.1). PQ: the EETF on each of R'G'B' (code values), PQ's EOTF, then / 203. HLG: the inverse OETF
+# and the OOTF of BT.2100 (system gamma 1.2 on the scene luminance, for the 1000 cd/m2 reference display, BT.2408's
+# conversion point), then the EETF on that luminance, colour ratios kept.
 
 # Linear BT.2020 RGB -> linear BT.709 RGB (ITU-R BT.2087).
 _BT2020_TO_BT709 = np.array([[1.6605, -0.5876, -0.0728], [-0.1246, 1.1329, -0.0083], [-0.0182, -0.1006, 1.1187]],
                             np.float32)
-SDR_WHITE_NITS = 203.0  # ITU-R BT.2408: HDR reference white, shown as SDR's white
+SDR_WHITE_NITS = 203.0  # ITU-R BT.2408: HDR reference white, shown as SDR's white (and the EETF's target peak)
+HDR_PEAK_NITS = 1000.0  # an HDR video's peak when it does not say (BT.2408's reference display); HLG's always
+_LUMA_2020 = np.array([0.2627, 0.6780, 0.0593], np.float32)  # BT.2100 luminance of linear BT.2020 RGB
+_PQ = (2610 / 16384, 2523 / 4096 * 128, 3424 / 4096, 2413 / 4096 * 32, 2392 / 4096 * 32)  # m1, m2, c1, c2, c3
 
 
-def _pq_to_nits(code: np.ndarray) -> np.ndarray:
-    m1, m2, c1, c2, c3 = 2610 / 16384, 2523 / 4096 * 128, 3424 / 4096, 2413 / 4096 * 32, 2392 / 4096 * 32
+def pq_to_nits(code: np.ndarray) -> np.ndarray:
+    """PQ's EOTF (BT.2100): non-linear signal 0..1 -> display light, cd/m2."""
+    m1, m2, c1, c2, c3 = _PQ
     p = np.power(np.clip(code, 0, 1), 1 / m2)
     return 10000 * np.power(np.maximum(p - c1, 0) / (c2 - c3 * p), 1 / m1)
 
 
-def _hlg_to_nits(code: np.ndarray, peak: float = 1000.0) -> np.ndarray:
-    """HLG inverse OETF, then the OOTF's system gamma 1.2 on each channel (a 1000 cd/m2 display)."""
+def nits_to_pq(nits: np.ndarray) -> np.ndarray:
+    """PQ's inverse EOTF (BT.2100): display light, cd/m2 -> non-linear signal 0..1."""
+    m1, m2, c1, c2, c3 = _PQ
+    y = np.power(np.clip(np.asarray(nits, np.float64) / 10000, 0, 1), m1)
+    return np.power((c1 + c2 * y) / (1 + c3 * y), m2)
+
+
+def bt2390_eetf(code: np.ndarray, source_peak: float, target_peak: float) -> np.ndarray:
+    """Report ITU-R BT.2390's EETF on PQ code values: light from black to ``source_peak`` (cd/m2) fitted under
+    ``target_peak``. Unchanged up to the knee KS = 1.5 maxLum - 0.5 (in PQ, relative to the source peak), a Hermite
+    spline above it with slope 1 at the knee and reaching exactly the target peak at the source peak: monotonic,
+    nothing below the source peak clipped. Black levels 0 (the black lift term vanishes). Above the source peak:
+    the target peak."""
+    source_pq = float(nits_to_pq(source_peak))
+    if target_peak >= source_peak:
+        return np.minimum(code, nits_to_pq(target_peak))
+    max_lum = float(nits_to_pq(target_peak)) / source_pq
+    knee = 1.5 * max_lum - 0.5
+    e1 = np.clip(np.asarray(code, np.float64) / source_pq, 0, 1)
+    t = (e1 - knee) / (1 - knee)
+    spline = (2 * t**3 - 3 * t**2 + 1) * knee + (t**3 - 2 * t**2 + t) * (1 - knee) + (-2 * t**3 + 3 * t**2) * max_lum
+    return np.where(e1 < knee, e1, spline) * source_pq
+
+
+def hlg_to_scene(code: np.ndarray) -> np.ndarray:
+    """HLG's inverse OETF (BT.2100): non-linear signal 0..1 -> scene light 0..1."""
     a, b, c = 0.17883277, 0.28466892, 0.55991073
     code = np.clip(code, 0, 1)
-    scene = np.where(code <= 0.5, code * code / 3, (np.exp((code - c) / a) + b) / 12)
-    return peak * np.power(scene, 1.2)
+    return np.where(code <= 0.5, code * code / 3, (np.exp((code - c) / a) + b) / 12)
 
 
-def _lut(colour: ColourDescription) -> np.ndarray | None:
-    """Code value (4096 steps over 0..255) -> linear light relative to SDR white, for HDR and BT.2020 video."""
-    code = np.linspace(0, 1, 4096)
+def source_peak_nits(colour: ColourDescription) -> float:
+    """The brightest light the video holds: its MaxCLL, else its mastering display's peak, else HDR_PEAK_NITS."""
+    if colour.content_light is not None and colour.content_light[0] > 0:
+        return float(colour.content_light[0])
+    if colour.mastering is not None and colour.mastering[-1][1] > 0:
+        return float(colour.mastering[-1][1])
+    return HDR_PEAK_NITS
+
+
+_STEPS = 4096  # look-up table size over the 0..255 code values
+
+
+@functools.lru_cache(maxsize=16)
+def _channel_lut(colour: ColourDescription) -> np.ndarray | None:
+    """Code value (_STEPS steps over 0..255) -> linear light relative to SDR white, channel by channel: PQ (EETF)
+    and BT.2020 SDR (BT.1886's gamma 2.4); None where there is nothing to convert (BT.601/709 SDR)."""
+    code = np.linspace(0, 1, _STEPS)
     if colour.transfer == PQ:
-        nits = _pq_to_nits(code)
-    elif colour.transfer == HLG:
-        nits = _hlg_to_nits(code)
-    elif colour.primaries == 9:
-        return np.power(code, 2.4).astype(np.float32)  # BT.1886 display gamma
-    else:
-        return None
-    linear = nits / SDR_WHITE_NITS
-    # As it is up to 75% of SDR white, then an exponential shoulder towards white (slope 1 at the knee): diffuse
-    # white shows at 93% of white, highlights above it are compressed rather than clipped.
-    knee = 0.75
-    shoulder = knee + (1 - knee) * (1 - np.exp(-(np.maximum(linear, knee) - knee) / (1 - knee)))
-    return np.where(linear <= knee, linear, shoulder).astype(np.float32)
+        mapped = bt2390_eetf(code, source_peak_nits(colour), SDR_WHITE_NITS)
+        return (pq_to_nits(mapped) / SDR_WHITE_NITS).astype(np.float32)
+    if colour.primaries == 9 and colour.transfer != HLG:
+        return np.power(code, 2.4).astype(np.float32)
+    return None
+
+
+def _hlg_gain_lut() -> np.ndarray:
+    """sqrt(scene luminance Ys) (_STEPS steps over 0..1) -> the factor taking HLG's scene light to display light
+    relative to SDR white: the OOTF's 1000 Ys^1.2 cd/m2, through the EETF, over 203 cd/m2, per unit of Ys."""
+    root = np.linspace(0, 1, _STEPS)
+    scene = np.maximum(root * root, 1e-12)
+    display = HDR_PEAK_NITS * np.power(scene, 1.2)
+    mapped = pq_to_nits(bt2390_eetf(nits_to_pq(display), HDR_PEAK_NITS, SDR_WHITE_NITS))
+    return (mapped / SDR_WHITE_NITS / scene).astype(np.float32)
 
 
 def display_rgb(rgb: np.ndarray, colour: ColourDescription) -> np.ndarray:
     """uint8 RGB of a frame as a person sees it on an ordinary (BT.709 / sRGB) screen: the frame as it is for
-    BT.601/709 video; BT.2020 primaries mapped into BT.709, PQ and HLG tone-mapped (HDR reference white, 203 cd/m2,
-    near SDR white; brighter highlights compressed). A display's view, not a colorimetric conversion."""
-    lut = _lut(colour)
-    if lut is None:
+    BT.601/709 video; BT.2020 primaries mapped into BT.709, PQ and HLG tone-mapped for SDR (module notes above:
+    HDR reference white near SDR white, brighter highlights compressed, not clipped, below the video's peak). A
+    display's view, not a colorimetric conversion."""
+    lut = None if colour.transfer == HLG else _channel_lut(colour)
+    if lut is None and colour.transfer != HLG:
         if rgb.dtype == np.uint8:
             return rgb
         return np.clip(np.asarray(rgb, np.float32) + np.float32(0.5), 0, 255).astype(np.uint8)
-    index = np.clip(np.asarray(rgb, np.float32) * np.float32(4095 / 255) + np.float32(0.5), 0, 4095).astype(np.int16)
-    linear = lut[index]
+    index = np.clip(np.asarray(rgb, np.float32) * np.float32((_STEPS - 1) / 255) + np.float32(0.5), 0,
+                    _STEPS - 1).astype(np.int16)
+    if colour.transfer == HLG:
+        scene = _HLG_SCENE_LUT[index]
+        root = np.sqrt(scene @ _LUMA_2020)
+        linear = scene * _HLG_GAIN_LUT[(root * np.float32(_STEPS - 1) + np.float32(0.5)).astype(np.int16)][..., None]
+    else:
+        linear = lut[index]
     if colour.primaries == 9:
         linear = linear @ _BT2020_TO_BT709.T
     encoded = np.power(np.clip(linear, 0, 1), np.float32(1 / 2.4))
     return (encoded * np.float32(255) + np.float32(0.5)).astype(np.uint8)
+
+
+_HLG_SCENE_LUT = hlg_to_scene(np.linspace(0, 1, _STEPS)).astype(np.float32)
+_HLG_GAIN_LUT = _hlg_gain_lut()
