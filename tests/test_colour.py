@@ -54,7 +54,8 @@ def scene(t: int) -> np.ndarray:
     return rgb.astype(np.float32)
 
 
-def make_clip(path, kind: str) -> None:
+def make_clip(path, kind: str, *, sei: bytes = b"") -> None:
+    """The shaky scene as clip ``kind``; ``sei``: Annex B NAL units put before every picture (HEVC)."""
     codec, pix_fmt, description = CLIPS[kind]
     options = {"crf": "8", "preset": "fast"}
     if codec == "libx265":
@@ -63,13 +64,21 @@ def make_clip(path, kind: str) -> None:
         stream = container.add_stream(codec, rate=25, options=options)
         stream.width, stream.height, stream.pix_fmt = W, H, pix_fmt
         colours.tag_stream(stream.codec_context, description)
+
+        def mux(packets):
+            for packet in packets:
+                if sei:
+                    prefixed = av.Packet(sei + bytes(packet))
+                    prefixed.pts, prefixed.dts, prefixed.time_base = packet.pts, packet.dts, packet.time_base
+                    prefixed.is_keyframe, prefixed.stream = packet.is_keyframe, stream
+                    packet = prefixed
+                container.mux(packet)
+
         for t in range(N):
             frame = colours.from_rgb(scene(t), description, pix_fmt)
             frame.pts = t
-            for packet in stream.encode(frame):
-                container.mux(packet)
-        for packet in stream.encode(None):
-            container.mux(packet)
+            mux(stream.encode(frame))
+        mux(stream.encode(None))
 
 
 @pytest.fixture(scope="module", params=list(CLIPS))
@@ -456,3 +465,89 @@ def test_without_ffprobe_the_chroma_location_is_unknown_and_the_job_runs(tmp_pat
         assert "warning" not in capsys.readouterr().err.lower()
         monkeypatch.undo()
         assert_faithful(path, output, "bt709")
+
+
+# ------------------------------------------------------------------------------------------------ dynamic metadata
+
+def hdr10plus_sei() -> bytes:
+    """An HEVC prefix SEI NAL unit (Annex B) carrying one SMPTE ST 2094-40 (HDR10+) message as ITU-T T.35
+    registered user data (payload type 4): country 0xB5, provider 0x003C, oriented code 1, application 4, then the
+    metadata's bit fields as FFmpeg's parser reads them (one window, no percentiles, no tone mapping curve). No
+    encoder here writes HDR10+ (this x265 is built without it, as Debian's is), so it is made by hand; FFmpeg's
+    decoder turns it into the frames' DYNAMIC_HDR_PLUS side data, as it does for a phone's HDR10+ video."""
+    fields = [(8, 1), (2, 1), (27, 400), (1, 0),  # application_version, num_windows, target display peak, flag
+              (17, 90000), (17, 90000), (17, 90000), (17, 10000),  # maxscl R, G, B and average maxrgb (1e-5 units)
+              (4, 0), (10, 0), (1, 0), (1, 0), (1, 0)]  # percentiles, bright pixels, three flags off
+    bits = "".join(format(value, f"0{size}b") for size, value in fields)
+    bits += "0" * (-len(bits) % 8)
+    t35 = bytes([0xB5, 0x00, 0x3C, 0x00, 0x01, 0x04]) + int(bits, 2).to_bytes(len(bits) // 8, "big")
+    payload = bytes([4, len(t35)]) + t35 + b"\x80"  # payload type, size, message, rbsp trailing bits
+    escaped, zeros = bytearray(), 0  # emulation prevention: no 00 00 0x inside a NAL unit
+    for byte in payload:
+        if zeros >= 2 and byte <= 3:
+            escaped.append(3)
+            zeros = 0
+        escaped.append(byte)
+        zeros = zeros + 1 if byte == 0 else 0
+    return b"\x00\x00\x00\x01" + bytes([39 << 1, 1]) + bytes(escaped)  # NAL type 39: prefix SEI
+
+
+def test_hdr10plus_input_says_in_one_line_that_its_dynamic_metadata_is_not_kept(tmp_path, capsys):
+    """A real HDR10+ clip (PQ, mastering metadata, an HDR10+ SEI on every picture): detected from the decoded
+    frames, one warning line, and the output is plain HDR10: tags, depth, static metadata and colour kept."""
+    path = tmp_path / "hdr10plus.mp4"
+    make_clip(path, "bt2020_pq_10bit", sei=hdr10plus_sei())
+    with av.open(str(path)) as container:
+        first = next(container.decode(video=0))
+        assert av.sidedata.sidedata.Type.DYNAMIC_HDR_PLUS in [side.type for side in first.side_data]
+    assert video_io.probe_video(path).colour.dynamic_metadata == "HDR10+"
+    output = tmp_path / "out.mp4"
+    assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", "none"]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "warning" in line.lower()]
+    assert len(warnings) == 1 and "HDR10+ dynamic metadata is not carried over" in warnings[0], warnings
+    assert "plain HDR10" in warnings[0]
+    assert_faithful(path, output, "bt2020_pq_10bit")  # mastering display and MaxCLL among the tags compared
+    assert video_io.probe_video(output).colour.dynamic_metadata is None
+    # the clip without the SEI says nothing (the warning is the SEI's)
+    make_clip(tmp_path / "hdr10.mp4", "bt2020_pq_10bit")
+    assert video_io.probe_video(tmp_path / "hdr10.mp4").colour.dynamic_metadata is None
+
+
+class _FrameWithSideData:
+    """A decoded frame with more side data: PyAV can read a frame's side data but not add to it, and no encoder
+    or tool here writes a Dolby Vision RPU that FFmpeg's decoder would accept (it drops RPUs that do not parse)."""
+
+    def __init__(self, frame: av.VideoFrame, *extra) -> None:
+        self._frame, self.side_data = frame, [*frame.side_data, *extra]
+
+    def __getattr__(self, name):
+        return getattr(self._frame, name)
+
+
+class _SideData:
+    def __init__(self, kind, data: bytes = b"") -> None:
+        self.type, self._data = kind, data
+
+    def __bytes__(self) -> bytes:
+        return self._data
+
+
+@pytest.mark.parametrize("kind", ["DOVI_METADATA", "DOVI_RPU_BUFFER"])
+def test_dolby_vision_side_data_is_detected_and_warned_of_once(kind, tmp_path):
+    """Dolby Vision through the seam describe() reads, the frame's side data (a stand-in entry on a real decoded
+    HLG frame: profile 8.4 is HLG-based); the writer then names it in one warning line and says the output is
+    plain HLG, with the tags kept."""
+    path = tmp_path / "hlg.mp4"
+    make_clip(path, "bt2020_hlg_10bit")
+    with av.open(str(path)) as container:
+        frame = next(container.decode(video=0))
+        plain = colours.describe(frame)
+        described = colours.describe(_FrameWithSideData(frame, _SideData(getattr(av.sidedata.sidedata.Type, kind))))
+    assert plain.dynamic_metadata is None and described.dynamic_metadata == "Dolby Vision"
+    assert dataclasses.replace(described, dynamic_metadata=None) == plain  # nothing else read differently
+    like = dataclasses.replace(video_io.probe_video(path), colour=described)
+    with video_io.VideoWriter(tmp_path / "out.mp4", like=like) as writer:
+        writer.write(np.zeros((H, W, 3), np.float32))
+    assert writer.warnings == ["the input's Dolby Vision dynamic metadata is not carried over: the output is plain "
+                               "HLG, tags kept"]
+    assert stream_tags(tmp_path / "out.mp4")["transfer"] == 18
