@@ -5,7 +5,8 @@
    VideoWriter asks for): wall and CPU seconds of this process, medians of --repeat.
 2. Whole commands, interleaved, medians of --repeat (wall s / CPU s of the process tree): `ffviz stabilize --mode
    none` and `--mode crop`, vid.stab's two passes and a plain x264 transcode, all at x264 CRF 18 preset medium
-   (ffviz's default and `ffviz bench`'s peers), and ffviz none against the transcode at CRF 23.
+   (ffviz's default and `ffviz bench`'s peers), ffviz none against the transcode at CRF 23, and none and crop
+   with --no-deblur (vid.stab does not deblur: what the rest of ffviz's chain costs).
 
 Usage: python benchmarks/encoder_speed.py [--clip ../shared/videos/vplab_C.avi] [--repeat 3]
        [--report docs/benchmarks-speed.md | --no-report]
@@ -68,6 +69,9 @@ def methods(clip: Path, tmp: str) -> dict[str, list[list[str]]]:
         "ffviz none (CRF 18)": [ffviz + ["-o", f"{tmp}/none.mp4", "--mode", "none"]],
         "ffviz crop (CRF 18)": [ffviz + ["-o", f"{tmp}/crop.mp4", "--mode", "crop"]],
         "ffviz none (CRF 23)": [ffviz + ["-o", f"{tmp}/none23.mp4", "--mode", "none", "--crf", "23"]],
+        # what deblurring (which vid.stab does not do) costs of the two modes
+        "ffviz none --no-deblur (CRF 18)": [ffviz + ["-o", f"{tmp}/none_nd.mp4", "--mode", "none", "--no-deblur"]],
+        "ffviz crop --no-deblur (CRF 18)": [ffviz + ["-o", f"{tmp}/crop_nd.mp4", "--mode", "crop", "--no-deblur"]],
     }
     if shutil.which("ffmpeg"):
         found["vid.stab two passes (CRF 18)"] = [
@@ -126,6 +130,9 @@ def main(argv: list[str] | None = None) -> int:
                       f"{none[1] / med(vidstab)[1]:.2f}x CPU; crop {crop[0] / med(vidstab)[0]:.2f}x wall, "
                       f"{crop[1] / med(vidstab)[1]:.2f}x CPU. Against the transcode (moonshot: <= 1.3x): none "
                       f"{none[0] / med(x264)[0]:.2f}x wall, {none[1] / med(x264)[1]:.2f}x CPU."]
+        plain = med(commands_runs["ffviz none --no-deblur (CRF 18)"])
+        lines += [f"Without deblurring: none {plain[0] / med(vidstab)[0]:.2f}x vid.stab's wall, "
+                  f"{plain[1] / med(vidstab)[1]:.2f}x its CPU."]
     speed_report.publish("encoding", lines, None if args.no_report else args.report)
     return 0
 

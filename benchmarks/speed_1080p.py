@@ -1,0 +1,118 @@
+"""Benchmark: 1080p (issue 24, target 4): ffviz full, crop and none against a plain x264 transcode at the same settings.
+
+The clip: the first --frames frames of a shared 640x360 clip upscaled to 1920x1080 by ffmpeg (Lanczos, x264 CRF 16
+preset fast), and a second one --frames x 2 long, so that peak memory can be compared across lengths. Each command
+runs as its own child process, measured from outside as `ffviz bench` measures (ffviz/bench.py run_measured: wall
+and CPU seconds of the process tree, peak RSS from wait4), --repeat times, medians. The transcode: ffmpeg decoding
+the clip and encoding it with libx264 CRF 18 preset medium, ffviz's default encoder settings. Then each mode's
+CPU ms a frame per stage on the shorter clip (`ffviz bench --profile`'s measurement, ffviz/bench_profile.py,
+without the recording run).
+
+Usage: python benchmarks/speed_1080p.py [--clip ../shared/videos/vplab_C.avi] [--frames 40] [--repeat 1]
+       [--modes full,crop,none] [--report docs/benchmarks-speed.md | --no-report]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from ffviz import bench_profile
+from ffviz.bench import ffviz_command, run_measured
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import speed_report  # noqa: E402  (benchmarks/ is not a package)
+
+VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+X264 = ["-fps_mode", "passthrough", "-c:v", "libx264", "-preset", "medium", "-crf", "18"]
+
+
+def upscaled(clip: Path, frames: int, out: Path) -> Path:
+    """The first ``frames`` frames of ``clip`` at 1920x1080 (H.264 CRF 16: close to the source, cheap to decode)."""
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-frames:v", str(frames), "-an",
+                    "-vf", "scale=1920:1080:flags=lanczos", "-c:v", "libx264", "-crf", "16", "-preset", "fast",
+                    "-pix_fmt", "yuv420p", str(out)], check=True)
+    return out
+
+
+def commands(clip: Path, modes: list[str], work: Path) -> dict[str, list[str]]:
+    found = {f"ffviz {mode}": ffviz_command(clip, work / f"{clip.stem}.{mode}.mp4", mode) for mode in modes}
+    found["x264 transcode"] = ["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-vf", "format=yuv420p", *X264,
+                               str(work / f"{clip.stem}.x264.mp4")]
+    return found
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--clip", type=Path, default=VIDEOS / "vplab_C.avi")
+    parser.add_argument("--frames", type=int, default=40)
+    parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--modes", default="full,crop,none")
+    parser.add_argument("--no-profile", action="store_true")
+    parser.add_argument("--report", type=Path, default=speed_report.REPORT)
+    parser.add_argument("--no-report", action="store_true")
+    args = parser.parse_args(argv)
+    if not args.clip.is_file() or shutil.which("ffmpeg") is None:
+        print(f"{args.clip} or ffmpeg not found: nothing measured")
+        return 0
+    started = speed_report.machine_line()
+    modes = args.modes.split(",")
+    lengths = (args.frames, 2 * args.frames)
+    runs: dict[tuple[str, int], list] = {}
+    profiles = []
+    with tempfile.TemporaryDirectory(prefix="ffviz-1080p-") as tmp:
+        work = Path(tmp)
+        clips = {n: upscaled(args.clip, n, work / f"{args.clip.stem}_1080p_{n}.mp4") for n in lengths}
+        for _ in range(args.repeat):
+            for n, clip in clips.items():
+                for name, command in commands(clip, modes, work).items():
+                    run = run_measured(command)
+                    if run.returncode != 0:
+                        raise SystemExit(f"{name} on {clip.name} failed: {run.output_tail}")
+                    runs.setdefault((name, n), []).append(run)
+                    print(f"{name}, {n} frames: wall {run.seconds:.1f} s, CPU {run.cpu_seconds:.1f} s, peak RSS "
+                          f"{run.peak_rss_bytes / 2**20:.0f} MiB", flush=True)
+        if not args.no_profile:
+            profiles = [bench_profile.profile_stages(clips[args.frames], mode, recording=False) for mode in modes]
+
+    def med(name: str, n: int, field: str) -> float:
+        return statistics.median(getattr(run, field) for run in runs[(name, n)])
+
+    names = [*(f"ffviz {mode}" for mode in modes), "x264 transcode"]
+    x264_ms = {n: 1000 * med("x264 transcode", n, "cpu_seconds") / n for n in lengths}
+    lines = ["## 1080p: ffviz against the x264 transcode (target 4)", "",
+             f"Written by `benchmarks/speed_1080p.py` ({started}; --repeat {args.repeat}, medians). The clip: the "
+             f"first {lengths[0]} and {lengths[1]} frames of {args.clip.name} upscaled to 1920x1080. Whole commands "
+             "as `ffviz bench` measures them (wall and CPU s of the process tree, peak RSS); the transcode is "
+             "ffmpeg's decode + libx264 CRF 18 preset medium, ffviz's default encoder settings. Target: ffviz "
+             "full's CPU a frame <= 2x the transcode's; memory flat in the video's length.", "",
+             "| method | frames | wall s | CPU s | CPU ms a frame | x transcode's CPU a frame | peak RSS MiB |",
+             "|---|---|---|---|---|---|---|"]
+    for name in names:
+        for n in lengths:
+            cpu_ms = 1000 * med(name, n, "cpu_seconds") / n
+            lines.append(f"| {name} | {n} | {med(name, n, 'seconds'):.1f} | {med(name, n, 'cpu_seconds'):.1f} | "
+                         f"{cpu_ms:.0f} | {cpu_ms / x264_ms[n]:.2f} | {med(name, n, 'peak_rss_bytes') / 2**20:.0f} |")
+    if "full" in modes:
+        ratio = max(1000 * med("ffviz full", n, "cpu_seconds") / n / x264_ms[n] for n in lengths)
+        lines += ["", f"Full mode: {ratio:.2f}x the transcode's CPU a frame (target <= 2x: "
+                      f"{'met' if ratio <= 2 else 'missed'})."]
+    growth = [med(f"ffviz {mode}", lengths[1], "peak_rss_bytes") / med(f"ffviz {mode}", lengths[0], "peak_rss_bytes")
+              for mode in modes]
+    lines += [f"Peak RSS at {lengths[1]} frames over {lengths[0]}: "
+              + ", ".join(f"{mode} {g:.2f}x" for mode, g in zip(modes, growth)) + " (flat: about 1x)."]
+    if profiles:
+        lines += ["", f"Each stage's CPU ms a frame at 1080p ({lengths[0]} frames; ffviz/bench_profile.py: one worker "
+                      "in process, OpenCV's threads off, no recording run):", "", bench_profile.table_header(),
+                  *(profile.line() for profile in profiles)]
+    speed_report.publish("1080p", lines, None if args.no_report else args.report)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
