@@ -61,6 +61,23 @@ def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, he
     """plan_path for frames each seen from one camera position."""
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
                                 width=width, height=height, times_s=motion_pass.times_s)
+    if config.mode == "crop" and config.smoothing.uses_l1:
+        # The L1 program with Grundmann et al.'s crop-window constraint: the centred window of the scale given, or
+        # the window the path without it keeps (its largest common window), stays inside every input frame, and
+        # within it the path is as smooth as the program can make it.
+        window = None
+        if config.crop.scale is not None:
+            window = (config.crop.scale, (0.0, 0.0))
+        else:
+            today = warping.largest_crop(smoothed.orig_from_stab, width, height)
+            if today is not None:
+                cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+                window = (today.scale, (today.x0 + today.scale * cx - cx, today.y0 + today.scale * cy - cy))
+        if window is not None:
+            l1 = dataclasses.replace(config.smoothing.l1, crop_scale=window[0], crop_offset=window[1])
+            smoothed = smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(config.smoothing, l1=l1),
+                                        cuts=motion_pass.cuts, width=width, height=height,
+                                        times_s=motion_pass.times_s)
     warnings = [SINGLE_FRAME_WARNING] if motion_pass.n_frames == 1 else []
     warnings += smoothing.path_warnings(smoothed, config.smoothing)
     orig_from_out, crop = smoothed.orig_from_stab, None

@@ -143,9 +143,14 @@ class CropConfig:
 
     kind: str = "fixed"
     zoom_speed: float = DEFAULT_ZOOM_SPEED  # adaptive: % of the frame's size the zoom may change a frame
+    # The L1 path's crop window (its scale of the frame, each way); None: the window the path without it keeps.
+    scale: float | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in CROPS:
             raise ConfigError(f"crop must be one of {', '.join(CROPS)}, not {self.kind!r}")
+        if self.scale is not None and not 0.3 <= self.scale < 1.0:  # False for nan
+            raise ConfigError(f"crop scale must be in [0.3, 1) (the window's share of the frame each way), "
+                              f"not {self.scale}")
         if not 0 < self.zoom_speed <= 10:
             raise ConfigError(f"zoom speed must be in (0, 10] % a frame, not {self.zoom_speed}")

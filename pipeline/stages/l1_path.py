@@ -1,22 +1,24 @@
 """L1-optimal camera paths (Grundmann, Kwatra and Essa, CVPR 2011), beside eq. 18's Gaussian smoothing.
 
-The original camera path of a shot is accumulated from the inter-frame transforms, C_t = first_from_t, and read
-as four similarity parameters about the frame centre: x, y (px), angle (rad) and log scale. For each parameter
-the smooth path P is the solution of one linear program,
+The original path is C_t = C_{t-1} F_t, F_t = ``prev_from_curr`` of frame t. The smooth path is P_t = C_t B_t with
+B_t the update transform (``orig_from_stab``: stabilized pixel -> input pixel), a similarity about the frame centre:
+B(u) = c + (x, y) + e^s R(r) (u - c), in units of the half-diagonal (every number near 1; a unit of any parameter
+moves a frame corner by about one unit). Grundmann et al.'s residual R_t = F_{t+1} B_{t+1} - B_t is D P in frame t's
+coordinates (P_{t+1} - P_t = C_t R_t): its translation is linear in (x, y); its rotation and log scale are
+r_F + r_{t+1} - r_t and s_F + s_{t+1} - s_t, additive, so rotation and zoom do not leak into each other. One
+linear program (HiGHS, scipy.optimize.linprog) then
 
-    minimise  w1 |D P|_1 + w2 |D^2 P|_1 + w3 |D^3 P|_1   subject to  |P_t - C_t| <= margin_t,
+    minimises  w1 |R|_1 + w2 |D R|_1 + w3 |D^2 R|_1  (R_t's four numbers weighted alike)
 
-with D the forward difference. The L1 norms make most differences exactly zero, so the path is a sequence of
-still, constant-velocity and constant-acceleration pieces: what a viewer reads as a tripod, a dolly or a smooth
-pan, where a low-pass keeps a slow wander. The margin bounds how far each output frame departs from its input
-(completion fills what the departure uncovers); it replaces eq. 18's radius as the one control of how much is
-smoothed. The parameters are independent under box constraints, so each is its own small program (HiGHS, through
-scipy.optimize.linprog). Long shots are solved in overlapping windows, each window's first frames pinned to the
-previous solution, so time and memory grow linearly with the length.
-
-The correction of frame t is orig_from_stab_t = Sim(C_t)^-1 @ Sim(P_t), Sim the similarity of the four
-parameters: where P_t = C_t it is the identity. Only similarity parts are corrected: a long shot's accumulated
-shear or perspective drifts with the estimates' small errors, and undoing it would distort frames.
+and gives still, constant-velocity and constant-acceleration pieces: a tripod, a dolly, a smooth pan, where a
+low-pass keeps a slow wander. Only local F_t enter: nothing accumulates over a long shot. Constraints:
+- margins (full mode): |x|, |y|, |r|, |s| bounded: how far a frame may depart from its input (completion fills
+  what the departure uncovers); the parameters are then independent and solved as three smaller programs;
+- crop window (crop mode): the corners of the centred window of scale z, mapped by B_t, stay inside frame t:
+  linear in (a, b, x, y) = (e^s cos r, e^s sin r, x, y), written with a = 1 + s, b = r and the edge moved in by
+  the bound of that linearisation's error over the box, so no output pixel lies outside its input, by construction.
+Ties go to the path nearest the input (a cost too small to buy motion). Long shots are solved in overlapping
+windows, the first frames of each pinned to the previous solution: time and memory grow linearly with length.
 """
 
 from __future__ import annotations
@@ -26,18 +28,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline import geometry
 from pipeline.errors import ConfigError
 
 # Grundmann et al.'s weights: constant-velocity and constant-acceleration pieces are cheap, jerk is expensive.
 WEIGHTS = (10.0, 1.0, 100.0)
-# Cost of |P - C| a frame, times the smallest weight: over a 600-frame window it cannot pay for one unit of
-# motion (6e-2 < 1), so it only chooses among equally smooth paths the one nearest the input.
+# Cost of each |B_t - I| parameter a frame, times the smallest weight: over a 600-frame window it cannot pay for
+# one unit of motion, so it only chooses among equally smooth paths the one nearest the input.
 DEPARTURE_WEIGHT = 1e-4
 # Tripod: how far a held frame may depart from its input before the path has to move (completion fills the rest).
 TRIPOD_MARGIN_FRACTION = 0.1
 TRIPOD_MARGIN_DEG = 4.0
 TRIPOD_MARGIN_SCALE = 0.08
+CROP_EDGE_PX = 0.5  # the crop window's corners are kept this far inside the input frame's outer pixel centres
 
 
 @dataclass(frozen=True)
@@ -49,11 +51,17 @@ class L1PathConfig:
     margin_scale: float = 0.04  # relative zoom bound
     window: int = 600  # frames per program; longer shots are solved in overlapping windows
     overlap: int = 90  # frames a window shares with the previous one (the first half pinned)
-    weights: tuple[float, float, float] = WEIGHTS  # of |D P|, |D^2 P|, |D^3 P|
+    weights: tuple[float, float, float] = WEIGHTS  # of |R|, |D R|, |D^2 R|
+    # Crop mode: the window of this scale of the frame, centred crop_offset px from the frame's centre, stays inside
+    # every input frame. The translation margin is then this share of the room the window leaves (1: the window
+    # alone bounds it); rotation and zoom keep their margins.
+    crop_scale: float | None = None
+    crop_room_share: float = 1.0
+    crop_offset: tuple[float, float] = (0.0, 0.0)  # the window's centre from the frame's centre (px, x and y)
 
     @classmethod
     def tripod(cls) -> L1PathConfig:
-        """The camera held still: only |D P| costs, so the path is constant wherever a constant stays within
+        """The camera held still: only |R| costs, so the path is constant wherever a constant stays within
         the (wider) margin, and moves, by as little as it can, only where the input camera went further."""
         return cls(margin_fraction=TRIPOD_MARGIN_FRACTION, margin_deg=TRIPOD_MARGIN_DEG,
                    margin_scale=TRIPOD_MARGIN_SCALE, weights=(1.0, 0.0, 0.0))
@@ -64,120 +72,203 @@ class L1PathConfig:
         if self.window < 8 or not 4 <= self.overlap < self.window // 2:
             raise ConfigError(f"l1 path window {self.window} / overlap {self.overlap}: need window >= 8 and "
                              f"4 <= overlap < window / 2")
+        if self.crop_scale is not None and not 0.05 <= self.crop_scale <= 1.0:
+            raise ConfigError(f"crop scale must be in [0.05, 1], not {self.crop_scale}")
+        if not 0.0 <= self.crop_room_share <= 1.0:
+            raise ConfigError(f"crop room share must be in [0, 1], not {self.crop_room_share}")
 
 
-def plan(original: np.ndarray, margin: float | np.ndarray, weights: tuple[float, float, float] = WEIGHTS, *,
-         window: int = 600, overlap: int = 90) -> np.ndarray:
-    """The L1-optimal path (N,) for one parameter's original path ``original`` (N,), within ``margin`` of it."""
-    original = np.asarray(original, np.float64)
-    n = len(original)
-    margin = np.broadcast_to(np.asarray(margin, np.float64), (n,))
-    if not np.any(margin > 0):
-        return original.copy()  # nowhere to go: the path is the input's
-    if n <= window:
-        return _solve(original, original - margin, original + margin, weights)
-    path = np.empty(n)
-    pinned = overlap // 2
-    start = 0
-    while True:
-        stop = min(start + window, n)
-        lower, upper = original[start:stop] - margin[start:stop], original[start:stop] + margin[start:stop]
-        if start > 0:  # continuity: the first frames keep the previous window's solution
-            lower[:pinned] = upper[:pinned] = path[start:start + pinned]
-        solved = _solve(original[start:stop], lower, upper, weights)
-        path[start:stop] = solved
-        if stop == n:
-            return path
-        start = stop - overlap
+@dataclass(frozen=True)
+class _Frame:
+    """Normalised coordinates: u_hat = (u - centre) / half_diagonal."""
+
+    width: int
+    height: int
+
+    @property
+    def half_diagonal(self) -> float:
+        return max(math.hypot(self.width - 1, self.height - 1) / 2.0, 1e-9)
+
+    @property
+    def to_hat(self) -> np.ndarray:
+        l, cx, cy = self.half_diagonal, (self.width - 1) / 2.0, (self.height - 1) / 2.0
+        return np.array([[1 / l, 0, -cx / l], [0, 1 / l, -cy / l], [0, 0, 1.0]])
 
 
-def _solve(original: np.ndarray, lower: np.ndarray, upper: np.ndarray, weights: tuple[float, float, float]
-           ) -> np.ndarray:
-    """One linear program: variables P (n), then slacks e1, e2, e3 of the differences of orders 1, 2, 3, then e0 of
-    the departure |P - C|, at a cost too small to trade any smoothness for (DEPARTURE_WEIGHT): where many paths
-    are equally smooth (a tripod's constant may sit anywhere within every margin) it picks the one nearest the
-    input, not a corner of the feasible set."""
+def orig_from_stab(curr_from_prev: np.ndarray, config: L1PathConfig, width: int, height: int) -> np.ndarray:
+    """(N, 3, 3) update transforms B_t = S_t of one shot from its inter-frame transforms (N, 3, 3; [0] unused)."""
+    frame = _Frame(width, height)
+    to_hat = frame.to_hat
+    from_hat = np.linalg.inv(to_hat)
+    n = len(curr_from_prev)
+    # F_hat_t (t >= 1): the affine part of prev_from_curr in normalised coordinates.
+    f_hat = np.zeros((n, 2, 3))
+    f_hat[0, :, :2] = np.eye(2)
+    for t in range(1, n):
+        m = to_hat @ np.linalg.inv(curr_from_prev[t]) @ from_hat
+        f_hat[t] = (m / m[2, 2])[:2]
+    # C_t's rotation and log scale (summed over the shot): R_t's translation is taken by them into the shot's first
+    # frame's axes, where a constant-velocity pan is a constant D P (in frame t's the camera's roll would shake it).
+    p, q = (f_hat[:, 0, 0] + f_hat[:, 1, 1]) / 2.0, (f_hat[:, 1, 0] - f_hat[:, 0, 1]) / 2.0
+    steps = np.column_stack([np.arctan2(q, p), np.log(np.maximum(np.hypot(p, q), 1e-9))])
+    steps[0] = 0.0
+    c_angle = np.cumsum(steps, axis=0)  # (N, 2): angle, log scale
+    lower, upper = _bounds(n, config, frame)
+    # Full mode: (s), (r) and (x, y) share no residual and no constraint, so three smaller programs.
+    groups = [[0, 1, 2, 3]] if config.crop_scale is not None else [[0], [1], [2, 3]]
+    params = np.empty((n, 4))
+    if n <= config.window:
+        for g in groups:
+            params[:, g] = _solve(f_hat, c_angle, lower, upper, config, frame, g)
+    else:
+        pinned, start = config.overlap // 2, 0
+        while True:
+            stop = min(start + config.window, n)
+            lo, hi = lower[start:stop].copy(), upper[start:stop].copy()
+            if start > 0:  # continuity: the first frames keep the previous window's solution
+                lo[:pinned] = hi[:pinned] = params[start:start + pinned]
+            for g in groups:
+                params[start:stop, g] = _solve(f_hat[start:stop], c_angle[start:stop], lo, hi, config, frame, g)
+            if stop == n:
+                break
+            start = stop - config.overlap
+    out = np.empty((n, 3, 3))
+    for t, (log_scale, angle, x, y) in enumerate(params):
+        a, b = math.exp(log_scale) * math.cos(angle), math.exp(log_scale) * math.sin(angle)
+        out[t] = from_hat @ np.array([[a, -b, x], [b, a, y], [0.0, 0.0, 1.0]]) @ to_hat
+    return out
+
+
+def _bounds(n: int, config: L1PathConfig, frame: _Frame) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 4) lower and upper bounds of (s, r, x, y): the margins (full mode) or the crop's room (crop mode)."""
+    l = frame.half_diagonal
+    zoom = math.log1p(config.margin_scale)
+    turn = math.radians(min(config.margin_deg, 45.0))
+    if config.crop_scale is None:
+        shift = config.margin_fraction * max(frame.width, frame.height) / l
+        lower, upper = [-zoom, -turn, -shift, -shift], [zoom, turn, shift, shift]
+    else:
+        room = (1.0 - config.crop_scale) / 2.0
+        ox, oy = (abs(v) for v in config.crop_offset)
+        sx = config.crop_room_share * (room * (frame.width - 1) + ox) / l
+        sy = config.crop_room_share * (room * (frame.height - 1) + oy) / l
+        lower, upper = [-zoom, -turn, -sx, -sy], [zoom, turn, sx, sy]
+    return np.tile(lower, (n, 1)), np.tile(upper, (n, 1))
+
+
+def _solve(f_hat: np.ndarray, c_angle: np.ndarray, lower: np.ndarray, upper: np.ndarray, config: L1PathConfig,
+           frame: _Frame, group: list[int]) -> np.ndarray:
+    """(n, len(group)) values of the parameters ``group`` (indices into (s, r, x, y)) over one window, the others'
+    residuals left out (they share none with these). Each |v| is written v = e+ - e- with e+, e- >= 0 at the cost
+    of their sum: one equality row per number. Variables: the parameters, then the e+ of R's numbers for each
+    difference order used and of the departures from the input, then their e-."""
     import scipy.optimize  # here, not at the top: ~0.5 s of start-up a run on eq. 18's path does not need
-    import scipy.sparse
-    n = len(original)
-    orders = [k for k in (1, 2, 3) if n > k]
-    if not orders:
-        return np.clip(original, lower, upper)
-    # Work relative to the original's mean and scale, so that HiGHS sees numbers near 1.
-    offset = float(np.mean(original))
-    scale = max(float(np.max(upper - lower)), 1e-9)
-    lo, hi = (lower - offset) / scale, (upper - offset) / scale
-    sizes = [n - k for k in orders]
-    n_vars = n + sum(sizes) + n
-    cost = np.zeros(n_vars)
-    blocks, rows = [], []
-    column = n
-    for k, size in zip(orders, sizes):
-        cost[column:column + size] = weights[k - 1]
-        difference = _difference(n, k)  # (size, n)
-        slack = scipy.sparse.identity(size, format="csr")
-        left = scipy.sparse.csr_matrix((size, column - n))
-        right = scipy.sparse.csr_matrix((size, n_vars - column - size))
-        # D P - e <= 0 and -D P - e <= 0.
-        blocks.append(scipy.sparse.hstack([difference, left, -slack, right]))
-        blocks.append(scipy.sparse.hstack([-difference, left, -slack, right]))
-        rows.extend([size, size])
-        column += size
-    # P - e0 <= C and -P - e0 <= -C.
-    centre = (original - offset) / scale
-    cost[column:] = DEPARTURE_WEIGHT * min(w for w in weights if w > 0)
-    identity, departure = scipy.sparse.identity(n, format="csr"), scipy.sparse.identity(n, format="csr")
-    middle = scipy.sparse.csr_matrix((n, column - n))
-    blocks.append(scipy.sparse.hstack([identity, middle, -departure]))
-    blocks.append(scipy.sparse.hstack([-identity, middle, -departure]))
-    a_ub = scipy.sparse.vstack(blocks, format="csr")
-    b_ub = np.r_[np.zeros(a_ub.shape[0] - 2 * n), centre, -centre]
-    bounds = np.column_stack([np.r_[lo, np.zeros(n_vars - n)], np.r_[hi, np.full(n_vars - n, np.inf)]])
-    result = scipy.optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
-    if result.status != 0 or result.x is None:
-        return np.clip(original, lower, upper)  # cannot happen with feasible box bounds; stay safe
-    return np.clip(result.x[:n] * scale + offset, lower, upper)
+    import scipy.sparse as sp
+    n, k = len(f_hat), len(group)
+    lower, upper = lower[:, group], upper[:, group]
+    if n < 2 or np.all(lower == upper):
+        return np.clip(np.zeros((n, k)), lower, upper)
+    matrix, offset = _residual(f_hat, c_angle)  # R = matrix @ q + offset over all four parameters
+    columns = (4 * np.arange(n)[:, None] + np.asarray(group)[None, :]).ravel()
+    rows = (4 * np.arange(n - 1)[:, None] + np.asarray(group)[None, :]).ravel()
+    residual, offset = matrix[rows][:, columns], offset[rows]
+    blocks, costs = [], []
+    for order, weight in enumerate(config.weights):
+        if weight <= 0 or n - 1 - order < 1:
+            continue
+        diff = sp.kron(_difference(n - 1, order), sp.identity(k), format="csr")  # D^order over the R_t
+        blocks.append((diff @ residual, diff @ offset))
+        costs.append(np.full(blocks[-1][0].shape[0], weight))
+    blocks.append((sp.identity(k * n, format="csr"), np.zeros(k * n)))  # the departure from the input (q = 0)
+    costs.append(np.full(k * n, DEPARTURE_WEIGHT * min(w for w in config.weights if w > 0)))
+    n_q, n_slack = k * n, sum(len(c) for c in costs)
+    n_vars = n_q + 2 * n_slack
+    plus = sp.identity(n_slack, format="csr")
+    a_eq = sp.hstack([sp.vstack([m for m, _ in blocks]), -plus, plus], format="csr")
+    b_eq = -np.concatenate([m0 for _, m0 in blocks])
+    a_ub = b_ub = None
+    if config.crop_scale is not None:  # group is all four parameters
+        crop, b_ub = _crop_rows(n, config.crop_scale, config.crop_offset, frame, lower[0], upper[0])
+        a_ub = sp.hstack([crop, sp.csr_matrix((crop.shape[0], n_vars - n_q))], format="csr")
+    cost = np.concatenate([np.zeros(n_q), *costs, *costs])
+    bounds = np.column_stack([np.r_[lower.ravel(), np.zeros(n_vars - n_q)],
+                              np.r_[upper.ravel(), np.full(n_vars - n_q, np.inf)]])
+    result = scipy.optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds, method="highs")
+    if result.status != 0 or result.x is None:  # cannot happen: the input path (q = 0) is feasible; stay safe
+        return np.clip(np.zeros((n, k)), lower, upper)
+    return np.clip(result.x[:n_q].reshape(n, k), lower, upper)
+
+
+def _residual(f_hat: np.ndarray, c_angle: np.ndarray):
+    """R_t = F_{t+1} B_{t+1} - B_t for t = 0 .. n-2 as a (4 (n-1), 4 n) sparse matrix over q = (s, r, x, y) per frame
+    and a (4 (n-1),) offset. Its log scale and rotation are F's (of its similarity part) plus B_{t+1}'s minus B_t's;
+    its translation is F's linear part times (x, y)_{t+1} plus F's translation, minus (x, y)_t, turned and scaled by
+    C_t's rotation and log scale ``c_angle[t]``."""
+    import scipy.sparse as sp
+    n = len(f_hat)
+    f = f_hat[1:]
+    p, q = (f[:, 0, 0] + f[:, 1, 1]) / 2.0, (f[:, 1, 0] - f[:, 0, 1]) / 2.0
+    forward = np.zeros((n - 1, 4, 4))
+    forward[:, 0, 0] = forward[:, 1, 1] = 1.0
+    turn = np.zeros((n - 1, 4, 4))
+    turn[:, 0, 0] = turn[:, 1, 1] = 1.0
+    zoom = np.exp(c_angle[:-1, 1])
+    cos, sin = zoom * np.cos(c_angle[:-1, 0]), zoom * np.sin(c_angle[:-1, 0])
+    turn[:, 2, 2], turn[:, 2, 3], turn[:, 3, 2], turn[:, 3, 3] = cos, -sin, sin, cos
+    forward[:, 2:, 2:] = turn[:, 2:, 2:] @ f[:, :, :2]
+    nxt = sp.block_diag(list(forward), format="csr")  # acting on q_1 .. q_{n-1}
+    now = sp.block_diag(list(turn), format="csr")  # acting on q_0 .. q_{n-2}
+    zeros = sp.csr_matrix((4 * (n - 1), 4))
+    matrix = sp.hstack([zeros, nxt], format="csr") - sp.hstack([now, zeros], format="csr")
+    shift = np.einsum("tij,tj->ti", turn[:, 2:, 2:], f[:, :, 2])
+    offset = np.column_stack([np.log(np.maximum(np.hypot(p, q), 1e-9)), np.arctan2(q, p), shift])
+    return matrix, offset.ravel()
+
+
+def _crop_rows(n: int, scale: float, offset: tuple[float, float], frame: _Frame, lower: np.ndarray,
+               upper: np.ndarray):
+    """Inequalities (rows over q, bounds) keeping the window's corners, mapped by each B_t, inside the frame: the
+    window of ``scale`` centred ``offset`` px from the frame's centre. A corner w maps to (a wx - b wy + x,
+    b wx + a wy + y), written with a = 1 + s and b = r; over the box ``lower``..``upper`` of (s, r) that is off by at
+    most err_a |wx| + err_b |wy| (x; swapped for y), which moves the edge in: the exact corners stay inside."""
+    import scipy.sparse as sp
+    l = frame.half_diagonal
+    hx, hy = (frame.width - 1) / 2.0 / l, (frame.height - 1) / 2.0 / l
+    s_max = max(abs(lower[0]), abs(upper[0]))
+    r_max = max(abs(lower[1]), abs(upper[1]))
+    err_a = max(math.exp(s) - 1.0 - s for s in (lower[0], upper[0])) + math.exp(s_max) * (1.0 - math.cos(r_max))
+    err_b = math.expm1(s_max) * math.sin(r_max) + (r_max - math.sin(r_max))
+    ox, oy = offset[0] / l, offset[1] / l
+    zx, zy = scale * hx, scale * hy
+    rows = []
+    # The largest and smallest of each coordinate over the corners: with a > 0, on the two corners of that side.
+    for sign in (1.0, -1.0):
+        wx = ox + sign * zx
+        for wy in (oy - zy, oy + zy):  # sign * x = sign (wx (1 + s) - wy r + x)
+            rows.append(([sign * wx, -sign * wy, sign, 0.0],
+                         hx - CROP_EDGE_PX / l - err_a * abs(wx) - err_b * abs(wy) - sign * wx))
+        wy = oy + sign * zy
+        for wx in (ox - zx, ox + zx):  # sign * y = sign (wx r + wy (1 + s) + y)
+            rows.append(([sign * wy, sign * wx, 0.0, sign],
+                         hy - CROP_EDGE_PX / l - err_b * abs(wx) - err_a * abs(wy) - sign * wy))
+    block = np.array([row for row, _ in rows])  # (8, 4)
+    matrix = sp.kron(sp.identity(n), sp.csr_matrix(block), format="csr")
+    return matrix, np.tile([bound for _, bound in rows], n)
 
 
 def _difference(n: int, order: int):
-    """(n - order, n) forward difference of the given order."""
+    """(n - order, n) forward difference of the given order (order 0: the identity)."""
     import scipy.sparse
     coefficients = [math.comb(order, j) * (-1) ** (order - j) for j in range(order + 1)]
     return scipy.sparse.diags([float(c) for c in coefficients], list(range(order + 1)), shape=(n - order, n),
                               format="csr", dtype=np.float64)
 
 
-def similarity_parameters(first_from_t: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(N, 4): x, y (frame-centre displacement, px), angle (rad), log scale of each accumulated transform."""
-    out = np.empty((len(first_from_t), 4))
-    for t, m in enumerate(first_from_t):
-        dx, dy, angle, scale = geometry.decompose(m, width, height)
-        out[t] = dx, dy, math.radians(angle), math.log(max(scale, 1e-9))
-    return out
-
-
-def similarity(parameters: np.ndarray, width: int, height: int) -> np.ndarray:
-    """3x3 similarity about the frame centre with ``similarity_parameters``' (x, y, angle, log scale)."""
+def similarity(parameters, width: int, height: int) -> np.ndarray:
+    """3x3 similarity about the frame centre with parameters (x, y) px, angle (rad), log scale."""
     x, y, angle, log_scale = parameters
     s = math.exp(log_scale)
     c, n = s * math.cos(angle), s * math.sin(angle)
     cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
     # Maps the centre to centre + (x, y), rotating and scaling about it.
     return np.array([[c, -n, cx + x - (c * cx - n * cy)], [n, c, cy + y - (n * cx + c * cy)], [0.0, 0.0, 1.0]])
-
-
-def orig_from_stab(first_from_t: np.ndarray, config: L1PathConfig, width: int, height: int) -> np.ndarray:
-    """(N, 3, 3) corrections S_t of one shot from its accumulated path ``first_from_t`` (N, 3, 3)."""
-    original = similarity_parameters(first_from_t, width, height)
-    side = max(width, height)  # the same bound in px for x and y: the area left to complete is what it costs
-    margins = (config.margin_fraction * side, config.margin_fraction * side, math.radians(config.margin_deg),
-               math.log1p(config.margin_scale))
-    smooth = np.column_stack([plan(original[:, i], margins[i], config.weights, window=config.window,
-                                   overlap=config.overlap) for i in range(4)])
-    out = np.empty_like(first_from_t)
-    for t in range(len(first_from_t)):
-        # Only the similarity parts: the accumulated shear or perspective of a long shot drifts with the
-        # estimates' small errors, and undoing it would distort frames far from the shot's start.
-        m = np.linalg.inv(similarity(original[t], width, height)) @ similarity(smooth[t], width, height)
-        out[t] = m / m[2, 2]
-    return out

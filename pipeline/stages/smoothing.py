@@ -75,17 +75,31 @@ class SmoothingConfig:
     def l1_planner(self, width: int, height: int) -> l1_path.L1PathConfig:
         """The L1 program's config for this path: tripod's, or l1's margins scaled by the smoothness and cut to
         the departure bound (so the program is optimal within it, rather than clipped after)."""
-        config = l1_path.L1PathConfig.tripod() if self.path == "tripod" else self.l1
+        config = self.l1
+        if self.path == "tripod":
+            config = dataclasses.replace(l1_path.L1PathConfig.tripod(), crop_scale=config.crop_scale,
+                                         crop_offset=config.crop_offset)
         fraction, degrees, scale = config.margin_fraction, config.margin_deg, config.margin_scale
+        share = config.crop_room_share  # crop mode: the translation's bound is the room the crop window leaves
         if self.smoothness is not None:
             fraction *= self.smoothness.margin_factor("translation")
+            share *= min(self.smoothness.margin_factor("translation"), 1.0)
             degrees *= self.smoothness.margin_factor("rotation")
             scale *= self.smoothness.margin_factor("zoom")
         if self.max_shift is not None:
             fraction = min(fraction, self.max_shift / max(width, height, 1))
+            if config.crop_scale is not None and config.crop_scale < 1:
+                room = (1.0 - config.crop_scale) / 2.0 * max(max(width, height) - 1, 1)
+                share = min(share, self.max_shift / room)
         if self.max_angle is not None:
             degrees = min(degrees, self.max_angle)
-        return dataclasses.replace(config, margin_fraction=fraction, margin_deg=degrees, margin_scale=scale)
+        return dataclasses.replace(config, margin_fraction=fraction, margin_deg=degrees, margin_scale=scale,
+                                   crop_room_share=share)
+
+    @property
+    def uses_l1(self) -> bool:
+        """Whether any frame is planned by the L1 program (the l1 or tripod path, here or in a segment)."""
+        return self.path != "gaussian" or any(segment.path != "gaussian" for segment in self.segments)
 
     def label(self) -> str:
         """The setting in the command line's words (for warnings, recordings and figures)."""
@@ -261,13 +275,8 @@ def _finish(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_star
 
 def _l1_path(curr_from_prev: np.ndarray, first: int, last: int, config: l1_path.L1PathConfig, width: int,
              height: int) -> np.ndarray:
-    """S_t of the L1-optimal path for frames ``first``..``last`` of one shot (from its own accumulated path)."""
-    first_from_t = np.empty((last - first + 1, 3, 3))
-    first_from_t[0] = geometry.IDENTITY
-    for t in range(first + 1, last + 1):
-        m = first_from_t[t - first - 1] @ np.linalg.inv(curr_from_prev[t])
-        first_from_t[t - first] = m / m[2, 2]
-    return l1_path.orig_from_stab(first_from_t, config, max(width, 1), max(height, 1))
+    """S_t of the L1-optimal path for frames ``first``..``last`` of one shot (from its inter-frame transforms)."""
+    return l1_path.orig_from_stab(curr_from_prev[first:last + 1], config, max(width, 1), max(height, 1))
 
 
 def trajectories(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, segment_starts: Sequence[int],
