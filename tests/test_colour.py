@@ -227,7 +227,8 @@ def test_pq_and_hlg_curves_give_bt2100_and_bt2408_reference_levels():
     nits = np.array([0.01, 1, 100, 203, 1000, 10000])
     assert np.allclose(colours.pq_to_nits(colours.nits_to_pq(nits)), nits, rtol=1e-6)
     assert colours.pq_to_nits(np.array(1.0)) == pytest.approx(10000)
-    assert colours.hlg_to_scene(np.array(0.5)) == pytest.approx(1 / 12) and colours.hlg_to_scene(1.0) == pytest.approx(1)
+    assert colours.hlg_to_scene(np.array(0.5)) == pytest.approx(1 / 12)
+    assert colours.hlg_to_scene(np.array(1.0)) == pytest.approx(1)
     assert 1000 * colours.hlg_to_scene(np.array(0.75)) ** 1.2 == pytest.approx(203, abs=1.5)
 
 
