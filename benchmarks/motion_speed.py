@@ -35,6 +35,9 @@ VARIANTS: dict[str, dict] = {  # changes to MotionConfig's defaults
     "default": {},
     "before": dict(max_corners=600, hist_step=1),  # the defaults until issue 24
     "corners200": dict(max_corners=200),
+    "side480": dict(max_side=480),  # estimation on frames downscaled to 480 px on their longest side
+    "side320": dict(max_side=320),
+    "one_lk_pass": dict(lk_passes=1),
 }
 
 

@@ -47,7 +47,7 @@ DEBLUR_ALPHA = 8.0
 ERROR_SIGMA_PX = 4.0
 REJECT_ERROR = 32.0
 REJECT_GROW_PX = 8
-MIN_RATIO = 1.1
+MIN_RATIO = 1.2
 # Structure guard (see ``StructureGuard``): a neighbour's pixel is refused where the local structure of the
 # low-passed images disagrees, whatever the colours.
 STRUCTURE_MIN = 0.75
