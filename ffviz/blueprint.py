@@ -56,9 +56,10 @@ def _image(name: str, *entities: str) -> rrb.Spatial2DView:
 
 
 def _trajectory_view(axes: Sequence[str], unit: str) -> rrb.TimeSeriesView:
-    contents = [f"/{root}/{axis}" for axis in axes for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)]
-    return rrb.TimeSeriesView(name=f"camera path {', '.join(axes)} ({unit}): original vs smoothed",
-                              origin="/motion/trajectory", contents=contents)
+    roots = (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)
+    contents = [f"/{root}/{axis}" for axis in axes for root in roots]
+    return rrb.TimeSeriesView(name=f"camera path {', '.join(axes)} ({unit}): original, smoothed (the run's), "
+                              f"eq. 18, L1", origin="/motion/trajectory", contents=contents)
 
 
 def _traced_views(traced: Sequence[int], title: Callable[[int], str],
@@ -123,13 +124,17 @@ def smoothing_tab() -> rrb.Container:
         rrb.Horizontal(
             rrb.Vertical(_trajectory_view(("x",), "px"), _trajectory_view(("y",), "px"),
                          _trajectory_view(("angle",), "deg"), _trajectory_view(("zoom",), "%"),
-                         rrb.TimeSeriesView(name="crop scale (--mode crop)", origin=f"/{ent.CROP_SCALE}")),
+                         rrb.TimeSeriesView(name="crop scale (--mode crop)", origin=f"/{ent.CROP_SCALE}"),
+                         rrb.TimeSeriesView(name="crop window's room inside each input frame, px (--mode crop; "
+                                            ">= 0: no black pixel)", origin=f"/{ent.CROP_ROOM}")),
             rrb.Vertical(
                 _image("stabilized (eq. 19); crop window in yellow (--mode crop)", ent.STABILIZED_FRAME,
                        ent.CROP_WINDOW),
                 _image("missing area (red)", ent.STABILIZED_MISSING, ent.CROP_WINDOW),
                 _key("missing", "missing area"),
-                row_shares=[4, 4, 1],
+                _image("input; the output's corners in yellow (--mode crop: the crop-window constraint)",
+                       ent.INPUT_FRAME, ent.CROP_CONSTRAINT),
+                row_shares=[4, 4, 1, 4],
             ),
         ),
         _note("smoothing"),

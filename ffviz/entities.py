@@ -20,6 +20,8 @@ ROLLING_SHUTTER_BANDS = "motion/features/rolling_shutter"  # each band's view ag
 ROLLING_SHUTTER_SKEW = "motion/rolling_shutter"  # /{dx,dy}: bottom band's shift against the top band's, px
 TRAJECTORY_ORIGINAL = "motion/trajectory/original"  # /{x,y,angle,zoom}
 TRAJECTORY_SMOOTHED = "motion/trajectory/smoothed"
+TRAJECTORY_GAUSSIAN = "motion/trajectory/gaussian"  # eq. 18's path on the same motion, whichever the run follows
+TRAJECTORY_L1 = "motion/trajectory/l1"  # the L1 program's
 TRAJECTORY_AXES = ("x", "y", "angle", "zoom")  # px, px, degrees, % of the shot's first frame's scale
 PATH_SETTING = "motion/trajectory/setting"  # index of the path setting each frame was planned with (Scalars)
 PATH_SETTINGS = "motion/trajectory/settings"  # the settings, one a line, in the command line's words (static text)
@@ -32,6 +34,8 @@ OUTPUT_FRAME = "output/frame"
 CROP_WINDOW = "stabilized/crop"  # --mode crop: the window kept of every stabilized frame (Boxes2D, static;
 # per frame with --crop adaptive)
 CROP_SCALE = "stabilized/crop_scale"  # --mode crop: the window's scale per frame (Scalars)
+CROP_CONSTRAINT = "input/frame/crop_window"  # --mode crop: the output's corners in each input frame (LineStrips2D)
+CROP_ROOM = "stabilized/crop_room"  # --mode crop: how far inside its input frame the window's nearest corner is (px)
 
 # Frame streams: H.264 VideoStream by default (lossy, ~0.01 MB a frame); raw images with --lossless.
 # deblur/before and deblur/after are sparse video streams too (sharpened frames only, cleared in between).

@@ -127,8 +127,8 @@ def _series(recording: Recording, entity: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def trajectories(recording: Recording, requested: Sequence[int] | None = None) -> Figure:
-    """The camera path per axis, original against smoothed; where path settings change (--path-segment) each
-    stretch is shaded and labelled with its setting."""
+    """The camera path per axis, original against smoothed, with eq. 18's and the L1 path on the same motion where
+    recorded; where path settings change (--path-segment) each stretch is shaded and labelled with its setting."""
     units = {"x": "x (px)", "y": "y (px)", "angle": "angle (deg)", "zoom": "zoom (%)"}
     axis_names = [a for a in ent.TRAJECTORY_AXES if len(recording.scalars(f"{ent.TRAJECTORY_ORIGINAL}/{a}")[0])]
     fig = Figure(figsize=(8, 1.9 * len(axis_names) + 0.8), dpi=DPI, layout="constrained")
@@ -141,7 +141,13 @@ def trajectories(recording: Recording, requested: Sequence[int] | None = None) -
         ax.plot(frames, original, color=visual.hex_colour(visual.TRAJECTORY_COLOURS["original", axis]), linewidth=1.0,
                 label="original")
         ax.plot(smoothed_frames, smoothed, color=visual.hex_colour(visual.TRAJECTORY_COLOURS["smoothed", axis]),
-                linewidth=1.6, label="smoothed")
+                linewidth=1.6, label="smoothed (the run's)")
+        # Both planners on the same motion (PathComparison), in the recording's colours, dashed over the run's.
+        for root, label, colour in ((ent.TRAJECTORY_GAUSSIAN, "eq. 18 (gaussian)", "#78dc78"),
+                                    (ent.TRAJECTORY_L1, "L1", "#e66ee6")):
+            other_frames, other = recording.scalars(f"{root}/{axis}")
+            if len(other_frames):
+                ax.plot(other_frames, other, color=colour, linewidth=1.0, linestyle="--", label=label)
         for k, (first, last, _) in enumerate(stretches):
             if k % 2:
                 ax.axvspan(first - 0.5, last + 0.5, color="0.5", alpha=0.12, linewidth=0)

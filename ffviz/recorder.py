@@ -32,7 +32,7 @@ from pipeline import geometry
 from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
 from pipeline.stages.motion import MotionEstimate
 from pipeline.stages.rolling_shutter import Correction
-from pipeline.results import FrameResult, PathPlan, Stamp
+from pipeline.results import FrameResult, PathComparison, PathPlan, Stamp
 from pipeline.runtime.colour import ColourDescription, display_rgb
 from pipeline.runtime.video_io import Frame
 from pipeline.stages.deblur import DeblurResult
@@ -85,7 +85,7 @@ class Nested(str):
 
 _MOTION_SERIES = tuple(f"{ent.MOTION_PARAMS}/{name}" for name in ent.MOTION_PARAM_NAMES)
 _TRAJECTORY = {root: tuple(f"{root}/{axis}" for axis in ent.TRAJECTORY_AXES)
-               for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)}
+               for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)}
 _COMPLETION_STATS = tuple(f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback"))
 
 # The one table from result field to recording: every field of every result type the recorder receives, with the
@@ -118,6 +118,13 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "crop": Nested("CropWindow"),
         "adaptive_crop": Nested("AdaptiveCrop"),
         "warnings": (ent.LOG,),
+        "paths": Nested("PathComparison"),
+    },
+    "PathComparison": {
+        "gaussian": _TRAJECTORY[ent.TRAJECTORY_GAUSSIAN],
+        "l1": _TRAJECTORY[ent.TRAJECTORY_L1],
+        "crop_corners": (ent.CROP_CONSTRAINT,),
+        "crop_room_px": (ent.CROP_ROOM,),
     },
     "MotionPass": {
         "curr_from_prev": NotRecorded("recorded frame by frame from on_motion"),
@@ -481,6 +488,14 @@ class RerunRecorder:
         self.rec.log(ent.DEBLUR_BLURRINESS, rr.SeriesLines(names="blurriness b_t", colors=[(200, 80, 200)]), static=True)
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.SeriesLines(names="sharper neighbours used", colors=[(90, 160, 90)]),
                      static=True)
+        # The comparison: eq. 18 and the L1 path on the same motion, thin, in colours of their own.
+        for root, name, colour in ((ent.TRAJECTORY_GAUSSIAN, "eq. 18 (gaussian)", (120, 220, 120)),
+                                   (ent.TRAJECTORY_L1, "L1", (230, 110, 230))):
+            for axis in ent.TRAJECTORY_AXES:
+                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", colors=[colour], widths=1.0),
+                             static=True)
+        self.rec.log(ent.CROP_ROOM, rr.SeriesLines(names="crop window's room inside the input (px)",
+                                                   colors=[CROP_COLOUR], widths=2.0), static=True)
         # Original in warm colours, smoothed in cool ones; x and y told apart within each.
         colours = visual.TRAJECTORY_COLOURS
         for name in ("original", "smoothed"):
@@ -634,6 +649,8 @@ class RerunRecorder:
 
     def _on_path(self, plan: PathPlan) -> None:
         self._on_smoothing(plan.smoothing)
+        if plan.paths is not None:
+            self._on_paths(plan.paths)
         if plan.rolling_shutter is not None:
             self._on_rolling_shutter(plan.rolling_shutter)
         if plan.crop is not None:
@@ -643,6 +660,25 @@ class RerunRecorder:
             self._adaptive = self._crop = plan.adaptive_crop
             self._on_crop_scales(plan.adaptive_crop.scales)
             self._log_meta()
+
+    def _on_paths(self, paths: PathComparison) -> None:
+        """Eq. 18's and the L1 path beside the run's own (the trajectory views), and in crop mode each frame's
+        crop-window constraint: the output's corners on the input frame, and their room inside it (px)."""
+        frames = np.arange(len(paths.gaussian))
+        times = np.array([self._times.get(int(t), 0.0) for t in frames])
+        indexes = [rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
+                   rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)]
+        for root, values in ((ent.TRAJECTORY_GAUSSIAN, paths.gaussian), (ent.TRAJECTORY_L1, paths.l1)):
+            for column, axis in enumerate(ent.TRAJECTORY_AXES):
+                self.rec.send_columns(f"{root}/{axis}", indexes=indexes,
+                                      columns=rr.Scalars.columns(scalars=values[:, column]))
+        if paths.crop_room_px is not None:
+            self.rec.send_columns(ent.CROP_ROOM, indexes=indexes, columns=rr.Scalars.columns(scalars=paths.crop_room_px))
+        if paths.crop_corners is not None:
+            for t, corners in enumerate(paths.crop_corners):
+                self._set_time(Stamp(t, float(times[t])))
+                self.rec.log(ent.CROP_CONSTRAINT, rr.LineStrips2D([np.vstack([corners, corners[:1]])],
+                                                                  colors=[CROP_COLOUR], radii=1.0))
 
     def _on_crop_scales(self, scales: np.ndarray) -> None:
         """--mode crop: the window's scale per frame (constant for one window; --crop adaptive's follows the path)."""

@@ -17,7 +17,8 @@ import time
 from typing import Iterable, Iterator
 
 from pipeline.config import StabilizeConfig
-from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
+from pipeline import geometry
+from pipeline.results import FrameResult, MotionPass, PathComparison, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.source import FrameSource, one_pass
 from pipeline.runtime.window import PerFrame, Windowed, sliding_window
@@ -31,8 +32,38 @@ RENDER_SLACK_FRAMES = 8  # caches keep this many frames beyond the window: threa
 
 
 def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
-    """Smooth the whole path (it is tiny: one 3x3 matrix a frame) and choose each output frame's transform.
+    """Smooth the whole path (it is tiny: one 3x3 matrix a frame) and choose each output frame's transform, with
+    the other planner's path beside it for display (``PathPlan.paths``).
     With rolling-shutter correction, the path is that of the corrected views (each frame's middle row's)."""
+    plan = _plan(motion_pass, config, width, height)
+    return dataclasses.replace(plan, paths=_compare_paths(plan, config, width, height))
+
+
+def _compare_paths(plan: PathPlan, config: StabilizeConfig, width: int, height: int) -> PathComparison:
+    """Eq. 18's and the L1 path's trajectories on the same motion (the run's own where it follows one of them
+    alone) and, in crop mode, where each output frame's corners lie in its input frame."""
+    curr_from_prev = (plan.motion.curr_from_prev if plan.rolling_shutter is None
+                      else plan.rolling_shutter.curr_from_prev)
+    own = config.smoothing
+    trajectories = {}
+    for path in ("gaussian", "l1"):
+        if own.path == path and not own.segments:
+            trajectories[path] = plan.smoothing.smoothed_trajectory
+        else:
+            other = dataclasses.replace(own, path=path, segments=())
+            trajectories[path] = smoothing.smooth(curr_from_prev, other, cuts=plan.motion.cuts, width=width,
+                                                  height=height).smoothed_trajectory
+    corners = room = None
+    if config.mode == "crop":
+        outline = geometry.frame_corners(width, height)
+        corners = np.stack([geometry.apply(m, outline) for m in plan.orig_from_out])
+        room = np.minimum(np.minimum(corners[..., 0], width - 1 - corners[..., 0]),
+                          np.minimum(corners[..., 1], height - 1 - corners[..., 1])).min(axis=1)
+    return PathComparison(trajectories["gaussian"], trajectories["l1"], corners, room)
+
+
+def _plan(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
+    """plan_path without the comparison."""
     if config.rolling_shutter is None or motion_pass.tracks is None:
         return _plan_views(motion_pass, config, width, height)
     correction = rolling_shutter.estimate(motion_pass.curr_from_prev, motion_pass.tracks, config.rolling_shutter,

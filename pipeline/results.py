@@ -55,6 +55,18 @@ class MotionPass:
 
 
 @dataclass
+class PathComparison:
+    """Both planners on the same motion, for display: eq. 18's and the L1 program's trajectories (x, y px, angle deg,
+    zoom %, as SmoothingResult's), whichever the run follows, and in crop mode the crop-window constraint of each
+    frame: the output's corners in its input frame and how far the nearest lies inside that frame."""
+
+    gaussian: np.ndarray  # (N, 4) eq. 18 (the run's radius and smoothness)
+    l1: np.ndarray  # (N, 4) the L1 program (the run's margins; the run's own path, crop window and all, if L1)
+    crop_corners: np.ndarray | None = None  # (N, 4, 2) crop mode: the output frame's corners in input pixels
+    crop_room_px: np.ndarray | None = None  # (N,) crop mode: their least distance inside the input frame (< 0: out)
+
+
+@dataclass
 class PathPlan:
     """Everything decided for the whole video before any frame is rendered: the estimates, the smoothed path
     (eq. 18, or the L1 path), the transform from each output frame to its input frame, and the crop window in
@@ -67,6 +79,7 @@ class PathPlan:
     warnings: list[str]  # about the path as a whole (limits reached, crop given up, a single frame)
     adaptive_crop: AdaptiveCrop | None = None  # crop mode with --crop adaptive: a window per frame
     rolling_shutter: Correction | None = None  # --rolling-shutter: each frame's rows against its middle row
+    paths: PathComparison | None = None  # eq. 18 and the L1 path side by side, for the recording and figures
 
 
 @dataclass

@@ -243,3 +243,38 @@ def test_cli_path_options_end_to_end(tmp_path, capsys):
     assert cli.main(["stabilize", str(source), "-o", str(tmp_path / "x.mp4"), "--tripod", "--path", "l1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--tripod" in err[0]
+
+
+def test_the_recording_and_figure_show_both_paths_and_the_crop_constraint(tmp_path):
+    """Crop mode on the L1 path, recorded and read back: eq. 18's and the L1 path per axis equal the plan's
+    comparison (the L1 one the run's own), the crop window's room is >= 0 on every frame and its corners are drawn
+    on each input frame; the trajectory figure has a line for each path."""
+    from ffviz import entities as ent, figures
+    from ffviz.recorder import RerunRecorder
+    from ffviz.rrd import Recording
+    from pipeline.evaluation import synthetic
+    from pipeline.runtime.observer import Observers, StageCollector
+    from pipeline.stabilize import stabilize
+
+    video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30, seed=3,
+                                                         blurred_frames=(), moving_object=False))
+    source = tmp_path / "in.mp4"
+    synthetic.write_video(video, source)
+    rrd = tmp_path / "run.rrd"
+    collector = StageCollector("path")
+    config = StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig(path="l1"))
+    stabilize(source, None, config, observer=Observers(RerunRecorder(rrd, level="full"), collector))
+    [(_, plan)] = collector.results["path"]
+    np.testing.assert_allclose(plan.paths.l1, plan.smoothing.smoothed_trajectory)
+    assert np.abs(plan.paths.gaussian - plan.paths.l1).max() > 0.5  # two different paths
+    recording = Recording.load(rrd)
+    for root, truth in ((ent.TRAJECTORY_GAUSSIAN, plan.paths.gaussian), (ent.TRAJECTORY_L1, plan.paths.l1)):
+        for column, axis in enumerate(ent.TRAJECTORY_AXES):
+            np.testing.assert_allclose(recording.scalars(f"{root}/{axis}")[1], truth[:, column], atol=1e-4)
+    room = recording.scalars(ent.CROP_ROOM)[1]
+    assert len(room) == 30 and room.min() >= -1e-6
+    np.testing.assert_allclose(room, plan.paths.crop_room_px, atol=1e-4)
+    assert recording.rows(ent.CROP_CONSTRAINT) == 30
+    fig = figures.trajectories(recording)
+    labels = {line.get_label() for line in fig.axes[0].lines}
+    assert {"original", "eq. 18 (gaussian)", "L1"} <= labels
