@@ -236,6 +236,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--zoom-speed", type=float, default=adaptive_crop.DEFAULT_ZOOM_SPEED, metavar="PCT",
                    help="with --crop adaptive: how fast the zoom may change, in %% of the frame a frame "
                         "(default: %(default)s)")
+    p.add_argument("--crop-scale", type=float, default=None, metavar="Z",
+                   help="with --mode crop and --path l1 or tripod: the crop window's size as a share of the frame "
+                        "each way (0.9 keeps 81%% of the area); the path is planned to keep this window inside "
+                        "every input frame (default: the window the path keeps without that constraint)")
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
                    help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "
                         "shear) or homography (also perspective) (default: %(default)s)")

@@ -83,7 +83,8 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
                 segments=tuple(path_control.PathSegment.parse(text) for text in getattr(args, "path_segment", []))),
             deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
             crop=adaptive_crop.CropConfig(kind=getattr(args, "crop", "fixed"),
-                                          zoom_speed=getattr(args, "zoom_speed", adaptive_crop.DEFAULT_ZOOM_SPEED)),
+                                          zoom_speed=getattr(args, "zoom_speed", adaptive_crop.DEFAULT_ZOOM_SPEED),
+                                          scale=getattr(args, "crop_scale", None)),
             rolling_shutter=getattr(args, "rolling_shutter", None),
         ), getattr(args, "quality", "default"))
     except ValueError as error:  # the configs validate their own values

@@ -28,6 +28,9 @@ class StabilizeConfig:
         object.__setattr__(self, "rolling_shutter", rolling_shutter.parse_readout(self.rolling_shutter))
         if self.mode not in OUTPUT_MODES:
             raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
+        if self.crop.scale is not None and not (self.mode == "crop" and self.smoothing.uses_l1):
+            raise ConfigError("--crop-scale needs --mode crop and the l1 or tripod path (it is the L1 program's "
+                              "crop-window constraint)")
 
     @property
     def completing(self) -> bool:

@@ -225,8 +225,8 @@ def test_horizon_lock_holds_the_output_rotation_at_zero(path):
 
 
 def test_cli_path_options_end_to_end(tmp_path, capsys):
-    """--path l1, --tripod and --horizon-lock run through the command line; --tripod with --path l1 is refused
-    in one line."""
+    """--path l1, --tripod, --horizon-lock and --crop-scale run through the command line; --tripod with --path l1
+    and --crop-scale on eq. 18's path are refused in one line."""
     from ffviz import cli
     from pipeline.evaluation import synthetic
     from pipeline.runtime import video_io
@@ -235,14 +235,18 @@ def test_cli_path_options_end_to_end(tmp_path, capsys):
                                                          blurred_frames=()))
     source = tmp_path / "shaky.mp4"
     synthetic.write_video(video, source)
-    for index, options in enumerate((["--path", "l1"], ["--tripod", "--horizon-lock"])):
+    for index, options in enumerate((["--mode", "none", "--path", "l1"], ["--mode", "none", "--tripod", "--horizon-lock"],
+                                     ["--mode", "crop", "--path", "l1", "--crop-scale", "0.9"])):
         out = tmp_path / f"out{index}.mp4"
-        assert cli.main(["stabilize", str(source), "-o", str(out), "--mode", "none", "--no-deblur", *options]) == 0
+        assert cli.main(["stabilize", str(source), "-o", str(out), "--no-deblur", *options]) == 0
         assert video_io.probe_video(out).frame_count == 30
-    capsys.readouterr()
-    assert cli.main(["stabilize", str(source), "-o", str(tmp_path / "x.mp4"), "--tripod", "--path", "l1"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--tripod" in err[0]
+    for options, word in ((["--tripod", "--path", "l1"], "--tripod"), (["--mode", "crop", "--crop-scale", "0.9"],
+                                                                       "--crop-scale")):
+        capsys.readouterr()
+        assert cli.main(["stabilize", str(source), "-o", str(tmp_path / "x.mp4"), *options]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and word in err[0]
+    assert not (tmp_path / "x.mp4").exists()
 
 
 def test_the_recording_and_figure_show_both_paths_and_the_crop_constraint(tmp_path):
