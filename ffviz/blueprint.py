@@ -9,7 +9,7 @@ from typing import Callable, Sequence
 
 import rerun.blueprint as rrb
 
-from ffviz import entities as ent
+from ffviz import entities as ent, visual
 
 TAB_ORDER = ("overview", "motion", "smoothing", "mosaic", "local flow + motion inpainting", "deblurring",
              "stage stepping", "about")
@@ -53,6 +53,12 @@ def _key(name: str, title: str) -> rrb.Spatial2DView:
 
 def _image(name: str, *entities: str) -> rrb.Spatial2DView:
     return rrb.Spatial2DView(name=name, origin="/", contents=[f"/{e}" for e in entities])
+
+
+def _map(name: str, entity: str) -> rrb.Spatial2DView:
+    """A colour-mapped float map: its pixels without a value are transparent and show the view's grey background
+    (visual.NO_VALUE_COLOUR, in none of the colour maps), not the colour of the lowest value."""
+    return rrb.Spatial2DView(name=name, origin="/", contents=[f"/{entity}"], background=visual.NO_VALUE_COLOUR)
 
 
 def _trajectory_view(axes: Sequence[str], unit: str) -> rrb.TimeSeriesView:
@@ -146,7 +152,7 @@ def smoothing_tab() -> rrb.Container:
 def mosaic_tab() -> rrb.Container:
     return rrb.Vertical(
         rrb.Horizontal(
-            rrb.Vertical(_image("mosaic variance (eq. 20)", ent.COMPLETION_VARIANCE), _key("variance", "variance"),
+            rrb.Vertical(_map("mosaic variance (eq. 20)", ent.COMPLETION_VARIANCE), _key("variance", "variance"),
                          row_shares=[4, 1]),
             rrb.Vertical(_image("missing pixels accepted (green) / rejected (red) by the mosaic", ent.COMPLETION_ACCEPTED),
                          _key("accepted", "mosaic"), row_shares=[4, 1]),
@@ -167,9 +173,9 @@ def inpainting_tab() -> rrb.Container:
         rrb.Horizontal(
             rrb.Vertical(_image("local flow, 1st neighbour (eqs. 23-24)",
                                 ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS), row_shares=[1]),
-            rrb.Vertical(_image("Fast Marching visiting order", ent.COMPLETION_FMM_ORDER),
+            rrb.Vertical(_map("Fast Marching visiting order", ent.COMPLETION_FMM_ORDER),
                          _key("fmm_order", "visiting order"), row_shares=[4, 1]),
-            rrb.Vertical(_image("Fast Marching arrival time T", ent.COMPLETION_FMM_ARRIVAL),
+            rrb.Vertical(_map("Fast Marching arrival time T", ent.COMPLETION_FMM_ARRIVAL),
                          _key("fmm_arrival", "arrival time"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(

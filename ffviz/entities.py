@@ -41,13 +41,20 @@ CROP_ROOM = "stabilized/crop_room"  # --mode crop: how far inside its input fram
 # deblur/before and deblur/after are sparse video streams too (sharpened frames only, cleared in between).
 FRAME_STREAMS = (INPUT_FRAME, "stabilized/frame", "completion/frame", OUTPUT_FRAME, "deblur/before", "deblur/after")
 
-# Float maps are stored as 16-bit PNG (EncodedDepthImage): stored = round(value / step) + 1, 0 = no value,
-# clipped at 65535. With --lossless they are float32 DepthImages, exact.
+# Float maps' values (at map_values(entity)) are stored as 16-bit PNG (EncodedDepthImage): stored = round(value /
+# step) + 1, 0 = no value, clipped at 65535. With --lossless they are float32 DepthImages, exact.
 MAP_STEPS = {"completion/mosaic/variance": 0.25,  # intensity^2 (0..255 scale); up to 16383.5
              "completion/fmm/order": 4.0,  # visiting order, to 4 pixels (shown as a share); up to 262132 pixels
              "completion/fmm/arrival": 0.01}  # Fast Marching arrival time T, px; up to 655 px
 MAP_UNITS = {"completion/mosaic/variance": "intensity^2", "completion/fmm/order": "pixels filled before",
              "completion/fmm/arrival": "px"}
+
+
+def map_values(entity: str) -> str:
+    """Where a float map's values are (MAP_STEPS); ``entity`` itself holds the picture the views show: the map
+    colour-mapped, transparent where it has no value (a depth image would show those as its lowest colour)."""
+    return f"{entity}/values"
+
 
 # Colour keys: small static images beside the views that show a colour-mapped image.
 KEYS = "keys"

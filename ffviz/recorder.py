@@ -10,12 +10,15 @@ are also logged stage by stage on the ``stage`` timeline and their Fast Marching
 
 from __future__ import annotations
 
+import functools
 import os
 import queue
+import struct
 import tempfile
 import threading
 import time
 import uuid
+import zlib
 from fractions import Fraction
 from pathlib import Path
 from typing import Any, Literal, Sequence
@@ -47,12 +50,18 @@ MAX_FEATURE_ARROWS = 300  # enough to read the motion, few enough to keep files 
 FILLED_BY_BASE = 100  # filled_by class of a local-warp pixel: FILLED_BY_BASE + neighbour offset
 # H.264 frame streams (rr.VideoStream): no B-frames (rerun takes each sample's time as its PTS), zerolatency so
 # that each frame's packet comes out with it (live view, no reordering), a keyframe a second for seeking.
-H264_OPTIONS = {"preset": "veryfast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
+# superfast: 0.57x veryfast's CPU time on vplab_C's four streams for 1.2x the bytes (~0.006 MB a frame more).
+H264_OPTIONS = {"preset": "superfast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
 KEYFRAME_INTERVAL = 30
 FRAME_SIZE_FIELD = "frame_size"  # (width, height) of a frame stream whose size is odd (ffviz.rrd crops to it)
 WEIGHTS_STEP = 8  # deblur/weights in the compact recording: multiples of 8/255 (--lossless: of 1/255)
 QUEUE_EVENTS = 48  # stage results waiting for the recorder's thread (~6 frames' worth): bounds the memory held
 _STOP = object()
+# Masks and maps as PNG: every row Paeth-filtered and zlib's run-length strategy, half the time of OpenCV's default
+# (each row's filter chosen by trying all five, zlib's default strategy) for 1-7 % more bytes on vplab_C's maps
+# and masks (docs/recording.md).
+PNG_OPTIONS = [cv2.IMWRITE_PNG_COMPRESSION, 6, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
+               cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_PAETH]
 # Chunks of up to 4 MB / 4096 rows. A file-only recording flushes on those alone (a tick would make the file's size
 # depend on the machine's speed: every flush writes each entity's schema again; vplab_C's full recording
 # carried 1.0 MB beyond its data in a 214 s run and 5.9 MB in a 1189 s one);
@@ -69,6 +78,9 @@ IGNORED_COLOUR = (200, 120, 255)  # outline of --ignore / --ignore-mask
 ROLLING_SHUTTER_COLOUR = (0, 220, 255)
 ROLLING_SHUTTER_GAIN = 5.0  # the bands' arrows are drawn this many times their length (shifts are a few px)
 ROLLING_SHUTTER_BANDS = 8
+# An RGBA image's alpha is used by the viewer (rerun 0.41) only when the image's opacity is below 1: at the default
+# 1 it is drawn opaque, its transparent pixels black (checked headless). 0.99 changes the colours by 1 %.
+SEE_THROUGH = 0.99
 LABEL_COLOUR = (255, 255, 255, 255)  # stage labels: opaque white reads as dark text on a light tag (checked headless)
 VARIANCE_RANGE = visual.VARIANCE_RANGE
 ARRIVAL_RANGE = visual.ARRIVAL_RANGE
@@ -197,7 +209,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
     },
     "MosaicResult": {
         "frame": (ent.trace_image("*"),),  # traced frames' "mosaic" stage
-        "variance": (ent.COMPLETION_VARIANCE,),
+        "variance": (ent.COMPLETION_VARIANCE, ent.map_values(ent.COMPLETION_VARIANCE)),
         "accepted": (ent.COMPLETION_ACCEPTED,),
         "remaining": NotRecorded("missing minus accepted, both recorded"),
         "coverage": NotRecorded("how many neighbours covered each pixel; the variance map shows where"),
@@ -224,8 +236,8 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
     },
     "MotionInpaintResult": {
         "flow": (ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS),
-        "order": (ent.COMPLETION_FMM_ORDER, ent.trace_fmm("*")),
-        "arrival": (ent.COMPLETION_FMM_ARRIVAL,),
+        "order": (ent.COMPLETION_FMM_ORDER, ent.map_values(ent.COMPLETION_FMM_ORDER), ent.trace_fmm("*")),
+        "arrival": (ent.COMPLETION_FMM_ARRIVAL, ent.map_values(ent.COMPLETION_FMM_ARRIVAL)),
         "filled": (ent.trace_fmm("*"),),
     },
     "DeblurResult": {
@@ -314,20 +326,42 @@ class VideoTrack:
             self._codec = None
 
 
-def palette_png(classes: np.ndarray, legend: Sequence[tuple]) -> bytes:
-    """A class map as an RGBA PNG, each class its legend colour (with alpha), so that it overlays the frame in
-    the viewer (which ignores a paletted PNG's transparency). Lossless: the legend's colours are distinct, and
-    the legend is logged as the entity's AnnotationContext, from which ffviz.rrd maps colours back to classes."""
-    lut = np.zeros((256, 4), np.uint8)
-    for code, _, colour in legend:
-        lut[code, :len(colour)] = colour
-        if len(colour) == 3:
-            lut[code, 3] = 255
-    rgba = lut[np.asarray(classes, np.uint8)]
-    ok, data = cv2.imencode(".png", cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA), [cv2.IMWRITE_PNG_COMPRESSION, 6])
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def indexed_png(indices: np.ndarray, palette: np.ndarray) -> bytes:
+    """An 8-bit paletted PNG: ``indices`` (uint8) into ``palette`` ((256, 4) RGBA; alpha in a tRNS chunk).
+
+    OpenCV writes no paletted PNG, but the image data of an 8-bit grey PNG is laid out as a paletted one's:
+    its grey encoding (a twentieth of an RGBA PNG's time here, fewer bytes) is relabelled (IHDR colour type 3)
+    and given the palette. The viewer honours the alphas when the image's opacity is below 1 (SEE_THROUGH);
+    ffviz.rrd reads the indices back."""
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(indices, np.uint8), PNG_OPTIONS)
     if not ok:
         raise RuntimeError("PNG encoding failed")
-    return data.tobytes()
+    data = data.tobytes()
+    header = bytearray(data[16:29])  # IHDR: width, height, bit depth 8, colour type 0 (grey), ...
+    header[9] = 3  # paletted
+    used = int(np.max(indices, initial=0)) + 1  # PLTE and tRNS need no entries past the highest index
+    return (data[:8] + _png_chunk(b"IHDR", bytes(header)) + _png_chunk(b"PLTE", palette[:used, :3].tobytes())
+            + _png_chunk(b"tRNS", palette[:used, 3].tobytes()) + data[33:])
+
+
+@functools.lru_cache(maxsize=32)
+def _legend_palette(legend: tuple) -> np.ndarray:
+    palette = np.zeros((256, 4), np.uint8)
+    for code, _, colour in legend:
+        palette[code, :len(colour)] = colour
+        if len(colour) == 3:
+            palette[code, 3] = 255
+    return palette
+
+
+def palette_png(classes: np.ndarray, legend: Sequence[tuple]) -> bytes:
+    """A class map as a paletted PNG whose indices are the classes, coloured (with alpha) by the legend, which
+    is also logged as the entity's AnnotationContext (names of the classes). Lossless by construction."""
+    return indexed_png(classes, _legend_palette(tuple(legend)))
 
 
 def quantised_map(values: np.ndarray, step: float) -> np.ndarray:
@@ -339,7 +373,8 @@ def quantised_map(values: np.ndarray, step: float) -> np.ndarray:
 
 
 def png16(stored: np.ndarray) -> bytes:
-    ok, data = cv2.imencode(".png", stored, [cv2.IMWRITE_PNG_COMPRESSION, 6])
+    """A grey PNG of ``stored`` (8 or 16 bits)."""
+    ok, data = cv2.imencode(".png", stored, PNG_OPTIONS)
     if not ok:
         raise RuntimeError("PNG encoding failed")
     return data.tobytes()
@@ -519,11 +554,13 @@ class RerunRecorder:
         return {
             "flow": visual.flow_wheel(),
             "variance": visual.colour_bar("turbo", 0, VARIANCE_RANGE[1], "intensity^2 (0-255 scale); threshold: "
-                                          "green in the mosaic map", "mosaic variance (eq. 20)"),
+                                          "green in the mosaic map", "mosaic variance (eq. 20)",
+                                          no_value="not missing, or under 2 neighbours there"),
             "fmm_order": visual.colour_bar("viridis", 0, 1, "share of the neighbour's filled pixels visited before",
-                                           "Fast Marching visiting order", fmt="{:.2f}"),
+                                           "Fast Marching visiting order", fmt="{:.2f}",
+                                           no_value="known, or not reached"),
             "fmm_arrival": visual.colour_bar("magma", 0, ARRIVAL_RANGE[1], "px from the nearest known pixel",
-                                             "Fast Marching arrival time T"),
+                                             "Fast Marching arrival time T", no_value="known (T = 0), or not reached"),
             "deblur_weights": visual.colour_bar("viridis", 0, 1, "share of the pixel from sharper neighbours",
                                                 "deblurring weights (eqs. 30-31)", fmt="{:.2f}"),
             "missing": visual.palette_key([(n, c) for _, n, c in MISSING_LEGEND[1:]], "stabilized frame"),
@@ -788,11 +825,14 @@ class RerunRecorder:
             order = first.inpainted.order.astype(np.float32)
             order[order < 0] = np.nan
             self._map(ent.COMPLETION_FMM_ORDER, order, "viridis", (0.0, float(np.nanmax(order)) if (order >= 0).any() else 1.0))
-            self._map(ent.COMPLETION_FMM_ARRIVAL, first.inpainted.arrival, "magma", ARRIVAL_RANGE)
-        else:  # no stale map from an earlier frame
-            for entity in (ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS, ent.COMPLETION_FMM_ORDER,
-                           ent.COMPLETION_FMM_ARRIVAL):
+            # Shown over the filled band only: T is 0 on every known pixel by definition.
+            arrival = first.inpainted.arrival
+            self._map(ent.COMPLETION_FMM_ARRIVAL, arrival, "magma", ARRIVAL_RANGE, shown=arrival > 0)
+        else:  # no stale map from an earlier frame (nor its values)
+            for entity in (ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS):
                 self.rec.log(entity, rr.Clear(recursive=False))
+            for entity in (ent.COMPLETION_FMM_ORDER, ent.COMPLETION_FMM_ARRIVAL):
+                self.rec.log(entity, rr.Clear(recursive=True))
 
     def _filled_by_classes(self, result: CompletionResult) -> np.ndarray:
         """Class per pixel: 0 original, 1 mosaic, 2 fallback, FILLED_BY_BASE + offset for local warps."""
@@ -915,16 +955,24 @@ class RerunRecorder:
         if self.lossless:
             self.rec.log(entity, rr.SegmentationImage(classes))
         else:
-            self.rec.log(entity, rr.EncodedImage(contents=palette_png(classes, legend), media_type="image/png"))
+            self.rec.log(entity, rr.EncodedImage(contents=palette_png(classes, legend), media_type="image/png",
+                                                 opacity=SEE_THROUGH))
 
-    def _map(self, entity: str, values: np.ndarray, colormap: str, value_range: tuple[float, float]) -> None:
-        """A float map: float32 DepthImage with --lossless, else a 16-bit PNG (entities.MAP_STEPS)."""
+    def _map(self, entity: str, values: np.ndarray, colormap: str, value_range: tuple[float, float],
+             shown: np.ndarray | None = None) -> None:
+        """A float map, twice. At ``entity``, what the views show: a paletted PNG colour-mapped as its key,
+        transparent where the map has no value (or not ``shown``); a depth image would paint those pixels its lowest
+        colour, reading as value 0 over the whole frame. At entities.map_values(entity), the values for reading back:
+        a float32 DepthImage with --lossless, else a 16-bit PNG (entities.MAP_STEPS)."""
         values = visual.finite_or_nan(values)
+        picture = indexed_png(visual.map_indices(values, value_range, shown), visual.map_palette(colormap))
+        self.rec.log(entity, rr.EncodedImage(contents=picture, media_type="image/png", opacity=SEE_THROUGH))
         if self.lossless:
-            self.rec.log(entity, rr.DepthImage(values, meter=1.0, colormap=colormap, depth_range=value_range))
+            self.rec.log(ent.map_values(entity), rr.DepthImage(values, meter=1.0, colormap=colormap,
+                                                               depth_range=value_range))
             return
         step = ent.MAP_STEPS[entity]
-        self.rec.log(entity, rr.EncodedDepthImage(
+        self.rec.log(ent.map_values(entity), rr.EncodedDepthImage(
             png16(quantised_map(values, step)), media_type="image/png", meter=1.0 / step, colormap=colormap,
             depth_range=(value_range[0] / step + 1, value_range[1] / step + 1)))
 
@@ -938,12 +986,13 @@ class RerunRecorder:
         return rr.EncodedImage(contents=jpeg.tobytes(), media_type="image/jpeg")
 
     @staticmethod
-    def _filled_by_legend(max_offset: int = 30) -> list:
+    @functools.cache
+    def _filled_by_legend(max_offset: int = 30) -> tuple:
         legend = [(0, "original", (0, 0, 0, 0)), (1, "mosaic", (40, 200, 90, 170)), (2, "fallback", (255, 200, 0, 200))]
         for offset in range(-max_offset, max_offset + 1):
             if offset:
                 legend.append((FILLED_BY_BASE + offset, f"neighbour {offset:+d}", _offset_colour(offset, 190)))
-        return legend
+        return tuple(legend)  # cached: built once
 
     @staticmethod
     def _deblur_source_classes(result: Any) -> np.ndarray:
@@ -960,12 +1009,13 @@ class RerunRecorder:
         return classes
 
     @staticmethod
-    def _deblur_source_legend(max_offset: int = 30) -> list:
+    @functools.cache
+    def _deblur_source_legend(max_offset: int = 30) -> tuple:
         legend = [(0, "own frame", (0, 0, 0, 0)), (1, "refused: other content", (230, 40, 60, 200))]
         for offset in range(-max_offset, max_offset + 1):
             if offset:
                 legend.append((FILLED_BY_BASE + offset, f"from neighbour {offset:+d}", _offset_colour(offset, 170)))
-        return legend
+        return tuple(legend)  # cached: built once
 
     def _log_meta(self, report: Any = None) -> None:
         """The about tab: a readable summary of the run, rewritten (static) as more becomes known."""
@@ -989,7 +1039,8 @@ class RerunRecorder:
                 lines.append(f"- colour: {colour.summary()}; the output keeps it. Frames here are 8-bit display "
                              f"RGB ({shown})")
         lines.append(f"- recorded: `--record {level}`, " + ("lossless images (`--lossless`)" if lossless else
-                     "frame streams as H.264 video, masks as lossless PNG, maps as 16-bit PNG"))
+                     "frame streams as H.264 video, masks as lossless PNG, maps as colour-mapped PNG with their "
+                     "values as 16-bit PNG"))
         if config is not None:
             lines += ["", "## Settings", ""] + [f"- {row}" for row in _config_rows(config)]
         if crop is not None and hasattr(crop, "scales"):  # --crop adaptive

@@ -5,6 +5,8 @@ Any timeline can index a query (``frame`` by default; ``stage`` and ``fmm_step``
 
 from __future__ import annotations
 
+import struct
+import zlib
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -120,6 +122,11 @@ class Recording:
         data = _blob(batch.column(column), row)
         if column == "EncodedDepthImage:blob":
             return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        if column == "EncodedImage:blob" and data[:4].tobytes() == b"\x89PNG" and data[25] == 3:
+            # Paletted (ffviz.recorder.indexed_png): a class map's classes (the entity has a legend), else the
+            # picture the viewer shows, RGBA (a colour-mapped float map; its values are at entities.map_values).
+            indices, palette = _paletted_png(data.tobytes())
+            return indices if self.annotation_colours(entity) else palette[indices]
         if column == "EncodedImage:blob" and data[:4].tobytes() == b"\x89PNG" and data[25] == 6:
             legend = self.annotation_colours(entity)
             if legend:  # an RGBA class map (ffviz.recorder.palette_png): colours back to classes
@@ -137,7 +144,9 @@ class Recording:
             image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
             if image is None:
                 raise ValueError(f"{entity} {timeline}={index}: undecodable image")
-            return cv2.cvtColor(image, cv2.COLOR_BGR2RGB) if image.ndim == 3 else image
+            if image.ndim == 3:  # RGB, or RGBA (a colour-mapped float map, transparent where it has no value)
+                return cv2.cvtColor(image, cv2.COLOR_BGR2RGB if image.shape[2] == 3 else cv2.COLOR_BGRA2RGBA)
+            return image
         archetype = column.split(":", 1)[0]
         fmt = batch.column(f"{archetype}:format")[row].values[0].as_py()
         dtype = _DTYPES[ChannelDatatype(fmt["channel_datatype"] or ChannelDatatype.U8)]
@@ -160,8 +169,9 @@ class Recording:
         return out
 
     def map(self, entity: str, index: int, timeline: str = ent.FRAME_TIMELINE) -> np.ndarray:
-        """A float map in its units (NaN = no value), whether stored as 16-bit PNG (entities.MAP_STEPS) or float."""
-        image = self.image(entity, index, timeline)
+        """A float map in its units (NaN = no value), whether stored as 16-bit PNG (entities.MAP_STEPS) or float;
+        read from entities.map_values(entity) (``entity`` itself is the colour-mapped picture the views show)."""
+        image = self.image(ent.map_values(entity), index, timeline)
         if image.dtype == np.uint16 and entity in ent.MAP_STEPS:
             return np.where(image > 0, (image.astype(np.float32) - 1) * np.float32(ent.MAP_STEPS[entity]), np.nan)
         return image.astype(np.float32)
@@ -233,6 +243,37 @@ class Recording:
                 if value:
                     out[int(time)] = value[0]
         return out
+
+
+def _paletted_png(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """(uint8 indices, (256, 4) RGBA palette) of an 8-bit paletted PNG: decoded as the grey PNG it is but for its
+    colour type and palette chunks (the inverse of ffviz.recorder.indexed_png; OpenCV would expand the colours)."""
+    palette = np.zeros((256, 4), np.uint8)
+    palette[:, 3] = 255
+    grey, offset = [data[:8]], 8
+    while offset < len(data):
+        length = struct.unpack(">I", data[offset:offset + 4])[0]
+        kind, body = data[offset + 4:offset + 8], data[offset + 8:offset + 8 + length]
+        end = offset + 12 + length
+        if kind == b"IHDR":
+            if body[8] != 8:
+                raise ValueError(f"paletted PNG of bit depth {body[8]}: only 8 is read")
+            header = bytearray(body)
+            header[9] = 0  # grey
+            grey.append(struct.pack(">I", length) + kind + bytes(header)
+                        + struct.pack(">I", zlib.crc32(kind + bytes(header))))
+        elif kind == b"PLTE":
+            colours = np.frombuffer(body, np.uint8).reshape(-1, 3)
+            palette[:len(colours), :3] = colours
+        elif kind == b"tRNS":
+            palette[:length, 3] = np.frombuffer(body, np.uint8)
+        else:
+            grey.append(data[offset:end])
+        offset = end
+    indices = cv2.imdecode(np.frombuffer(b"".join(grey), np.uint8), cv2.IMREAD_UNCHANGED)
+    if indices is None:
+        raise ValueError("undecodable paletted PNG")
+    return indices, palette
 
 
 def _blob(column: pa.Array, row: int) -> np.ndarray:

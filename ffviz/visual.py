@@ -30,7 +30,8 @@ def sparse_arrows(flow: np.ndarray, step: int = 16) -> tuple[np.ndarray, np.ndar
 
 
 def finite_or_nan(values: np.ndarray) -> np.ndarray:
-    """Float32 map with non-finite values as NaN (the viewer leaves NaN transparent)."""
+    """Float32 map with non-finite values as NaN (the viewer shows NaN in a depth image as the colour map's lowest
+    colour, like 0: colour_mapped makes them transparent)."""
     out = np.asarray(values, dtype=np.float32).copy()
     out[~np.isfinite(out)] = np.nan
     return out
@@ -57,6 +58,44 @@ _CV2_COLORMAPS = {"turbo": cv2.COLORMAP_TURBO, "viridis": cv2.COLORMAP_VIRIDIS, 
                   "inferno": cv2.COLORMAP_INFERNO, "plasma": cv2.COLORMAP_PLASMA}
 KEY_BACKGROUND = (250, 250, 250)
 KEY_TEXT = (20, 20, 20)
+# The background of the views that show colour-mapped maps: a map's pixels without a value are transparent, so
+# they show this grey, which none of the colour maps here (turbo, viridis, magma) contains.
+NO_VALUE_COLOUR = (128, 128, 128)
+MAP_LEVELS = 255  # colours a shown map uses: palette entries 1-255 of an 8-bit paletted PNG (0: no value)
+
+
+def map_indices(values: np.ndarray, value_range: tuple[float, float], shown: np.ndarray | None = None,
+                *, levels: int = MAP_LEVELS) -> np.ndarray:
+    """uint8 palette index per pixel of a float map: 1 + the value's step of ``levels`` over ``value_range``
+    (clipped to it) where ``shown`` (default: where finite) and finite; 0 elsewhere (no value)."""
+    values = np.asarray(values, np.float32)
+    finite = np.isfinite(values)
+    shown = finite if shown is None else (np.asarray(shown, bool) & finite)
+    low, high = float(value_range[0]), float(value_range[1])
+    steps = np.where(finite, values - np.float32(low), 0).astype(np.float32)
+    steps *= np.float32((levels - 1) / max(high - low, 1e-12))
+    np.clip(steps, 0, levels - 1, out=steps)
+    steps += np.float32(1.5)  # round, and 1 past the no-value index
+    indices = steps.astype(np.uint8)
+    indices[~shown] = 0
+    return indices
+
+
+def map_palette(colormap: str, *, levels: int = MAP_LEVELS) -> np.ndarray:
+    """(256, 4) uint8 RGBA palette for map_indices: 0 transparent, 1..levels ``colormap`` (the colour keys'
+    own, OpenCV's tables) from its lowest to its highest colour."""
+    ramp = np.rint(np.arange(levels) * (255.0 / max(levels - 1, 1))).astype(np.uint8)[:, None]
+    palette = np.zeros((256, 4), np.uint8)
+    palette[1:levels + 1, :3] = cv2.applyColorMap(ramp, _CV2_COLORMAPS[colormap])[:, 0, ::-1]
+    palette[1:levels + 1, 3] = 255
+    return palette
+
+
+def colour_mapped(values: np.ndarray, colormap: str, value_range: tuple[float, float],
+                  shown: np.ndarray | None = None) -> np.ndarray:
+    """RGBA uint8 picture of a float map as the viewer shows it: ``colormap`` over ``value_range``, opaque where
+    ``shown`` (default: where finite), (0, 0, 0, 0) elsewhere, so that no value does not read as the lowest."""
+    return map_palette(colormap)[map_indices(values, value_range, shown)]
 
 
 def _text(image: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.5) -> None:
@@ -64,11 +103,12 @@ def _text(image: np.ndarray, text: str, org: tuple[int, int], scale: float = 0.5
 
 
 def colour_bar(colormap: str, low: float, high: float, unit: str, title: str, *, width: int = 360,
-               ticks: int = 5, fmt: str = "{:g}") -> np.ndarray:
-    """RGB image: ``title``, a horizontal bar of ``colormap`` from ``low`` to ``high``, tick labels in ``unit``.
+               ticks: int = 5, fmt: str = "{:g}", no_value: str | None = None) -> np.ndarray:
+    """RGB image: ``title``, a horizontal bar of ``colormap`` from ``low`` to ``high``, tick labels in ``unit``;
+    with ``no_value``, a NO_VALUE_COLOUR swatch saying which pixels have none.
 
     Dark text on white, so it reads on any viewer theme."""
-    height, margin, bar_h = 90, 14, 22
+    height, margin, bar_h = 90 + (20 if no_value else 0), 14, 22
     image = np.full((height, width, 3), KEY_BACKGROUND, np.uint8)
     ramp = np.linspace(0, 255, width - 2 * margin).astype(np.uint8)[None, :]
     bar = cv2.cvtColor(cv2.applyColorMap(np.repeat(ramp, bar_h, axis=0), _CV2_COLORMAPS[colormap]), cv2.COLOR_BGR2RGB)
@@ -80,7 +120,11 @@ def colour_bar(colormap: str, low: float, high: float, unit: str, title: str, *,
         label = fmt.format(low + (high - low) * i / (ticks - 1))
         size = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, 0.42, 1)[0][0]
         _text(image, label, (int(np.clip(x - size // 2, 0, width - size)), 26 + bar_h + 20), 0.42)
-    _text(image, unit, (margin, height - 4), 0.42)
+    _text(image, unit, (margin, 86), 0.42)
+    if no_value:
+        cv2.rectangle(image, (margin, 92), (margin + 22, 104), NO_VALUE_COLOUR, -1)
+        cv2.rectangle(image, (margin, 92), (margin + 22, 104), KEY_TEXT, 1)
+        _text(image, f"no value: {no_value}", (margin + 30, 103), 0.42)
     return image
 
 

@@ -115,7 +115,7 @@ def test_logged_values_equal_the_pipelines(full_run):
         np.testing.assert_array_equal(recording.image(ent.COMPLETION_FRAME, t), result.frame)
         np.testing.assert_array_equal(recording.image(ent.COMPLETION_FALLBACK, t) > 0, result.fallback)
         np.testing.assert_array_equal(recording.image(ent.COMPLETION_ACCEPTED, t) == 2, result.mosaic.accepted)
-        np.testing.assert_array_equal(recording.image(ent.COMPLETION_VARIANCE, t),
+        np.testing.assert_array_equal(recording.map(ent.COMPLETION_VARIANCE, t),
                                       np.where(np.isfinite(result.mosaic.variance), result.mosaic.variance, np.nan)
                                       .astype(np.float32))
         filled_by = recording.image(ent.COMPLETION_FILLED_BY, t)
@@ -125,7 +125,7 @@ def test_logged_values_equal_the_pipelines(full_run):
         np.testing.assert_array_equal(filled_by[warped].astype(int) - FILLED_BY_BASE, result.filled_by[warped])
         if result.fills:
             inpainted = result.fills[0].inpainted
-            order = recording.image(ent.COMPLETION_FMM_ORDER, t)
+            order = recording.map(ent.COMPLETION_FMM_ORDER, t)
             np.testing.assert_array_equal(np.nan_to_num(order, nan=-1), inpainted.order)
             np.testing.assert_array_equal(recording.image(ent.COMPLETION_FLOW_IMAGE, t), visual.flow_to_rgb(inpainted.flow))
         frame_area = result.missing.size
@@ -435,6 +435,54 @@ def test_masks_are_exact_and_maps_within_half_a_step(compact_run):
         recorded = recording.image(ent.DEBLUR_WEIGHTS, sharpened[0]) / ent.DEBLUR_WEIGHTS_SCALE
         np.testing.assert_allclose(recorded, deblurred[sharpened[0]].weights,
                                    atol=(WEIGHTS_STEP / 2 + 0.5) / ent.DEBLUR_WEIGHTS_SCALE + 1e-6)
+
+
+def test_maps_are_shown_transparent_where_they_have_no_value(compact_run, full_run):
+    """The maps the views show: opaque in their key's colours where the map has a value, alpha 0 elsewhere (a
+    depth image paints those in the colour map's lowest colour, which read as value 0 over the whole frame)."""
+    for recording, collector in ((compact_run[1], compact_run[2]), full_run):
+        completion = by_frame(collector, "completion")
+        checked = 0
+        for t in (5, 18, 29):
+            result = completion[t]
+            maps = [(ent.COMPLETION_VARIANCE, result.mosaic.variance, np.isfinite(result.mosaic.variance),
+                     "turbo", visual.VARIANCE_RANGE)]
+            if result.fills:
+                inpainted = result.fills[0].inpainted
+                order = inpainted.order.astype(np.float32)
+                maps += [(ent.COMPLETION_FMM_ORDER, order, order >= 0, "viridis", (0.0, float(order.max()))),
+                         (ent.COMPLETION_FMM_ARRIVAL, inpainted.arrival,
+                          np.isfinite(inpainted.arrival) & (inpainted.arrival > 0), "magma", visual.ARRIVAL_RANGE)]
+            for entity, values, has_value, colormap, value_range in maps:
+                shown = recording.image(entity, t)
+                assert shown.shape == values.shape + (4,), entity
+                assert has_value.any() and not has_value.all(), (entity, t)
+                np.testing.assert_array_equal(shown[..., 3] == 255, has_value, err_msg=entity)
+                assert not shown[~has_value].any(), f"{entity} {t}: pixels without a value are not transparent"
+                expected = visual.colour_mapped(np.where(has_value, values, np.nan), colormap, value_range)
+                np.testing.assert_array_equal(shown, expected, err_msg=entity)
+                checked += 1
+        for entity in (ent.COMPLETION_VARIANCE, ent.COMPLETION_FMM_ORDER, ent.COMPLETION_FMM_ARRIVAL):
+            # The viewer draws an image of opacity 1 opaque, its transparent pixels black.
+            opacity = [v[0] if isinstance(v, list) else v for b in recording.batches[entity]
+                       if "EncodedImage:opacity" in b.schema.names for v in b.column("EncodedImage:opacity").to_pylist()
+                       if v is not None]
+            assert opacity and max(opacity) < 1.0, entity
+        assert checked >= 5
+
+
+def test_colour_mapped_pictures_follow_the_key():
+    """visual.colour_mapped: the key's colour map over the range, ends included, clipped beyond; NaN and not
+    shown pixels transparent."""
+    values = np.array([[0.0, 50.0, 100.0, 150.0, np.nan, -5.0]], np.float32)
+    rgba = visual.colour_mapped(values, "viridis", (0.0, 100.0), shown=np.array([[1, 1, 1, 1, 1, 0]], bool))
+    bar = visual.colour_bar("viridis", 0, 100, "", "")[30, 14:-14]  # the key's ramp, low to high
+    np.testing.assert_array_equal(rgba[0, 0, :3], bar[0])
+    np.testing.assert_array_equal(rgba[0, 2, :3], bar[-1])
+    np.testing.assert_array_equal(rgba[0, 3], rgba[0, 2])  # clipped at the top
+    assert np.abs(rgba[0, 1, :3].astype(int) - bar[len(bar) // 2]).max() <= 8
+    np.testing.assert_array_equal(rgba[0, :4, 3], 255)
+    np.testing.assert_array_equal(rgba[0, 4:], 0)
 
 
 def test_every_colour_mapped_entity_has_a_colour_key(compact_run, full_run):
