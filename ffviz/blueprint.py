@@ -19,9 +19,9 @@ TAB_NOTES = {
         "**How to read this recording.** The time line below is the frame number (`frame`): drag it or use the "
         "arrow keys, space plays. Left: the input; right: the stabilized, completed, deblurred output. Below: the "
         "camera path, original (warm colours) against smoothed (cool colours); the vertical line is the current "
-        "frame. Each tab after this one is a stage of the pipeline, in order; masks are shown beside the frames, "
-        "and every colour-mapped image has a colour key beside it. *stage stepping* follows a few frames through every stage (time line "
-        "`stage`); *about* summarises the run and lists its warnings."),
+        "frame. Each tab after this one is a stage of the pipeline, in order; masks are drawn over the frames they "
+        "describe, and every colour-mapped image has a colour key beside it. *stage stepping* follows a few frames "
+        "through every stage (time line `stage`); *about* summarises the run and lists its warnings."),
     "motion": ("**Motion estimation** (thesis ch. 3): corners tracked from frame t-1 to t (green inliers, red "
                "outliers), a robust fit of `curr_from_prev`; its shift, rotation and zoom per frame, inliers and "
                "the fit's residual. Orange: tracks of another motion (a moving object) the camera did not follow; "
@@ -136,7 +136,8 @@ def smoothing_tab() -> rrb.Container:
             rrb.Vertical(
                 _image("stabilized (eq. 19); crop window in yellow (--mode crop)", ent.STABILIZED_FRAME,
                        ent.CROP_WINDOW),
-                _image("missing area (red)", ent.STABILIZED_MISSING, ent.CROP_WINDOW),
+                _image("missing area (red)", ent.STABILIZED_FRAME, ent.STABILIZED_MISSING,
+                       ent.CROP_WINDOW),
                 _key("missing", "missing area"),
                 _image("input; the output's corners in yellow (--mode crop: the crop-window constraint)",
                        ent.INPUT_FRAME, ent.CROP_CONSTRAINT),
@@ -154,7 +155,8 @@ def mosaic_tab() -> rrb.Container:
         rrb.Horizontal(
             rrb.Vertical(_map("mosaic variance (eq. 20)", ent.COMPLETION_VARIANCE), _key("variance", "variance"),
                          row_shares=[4, 1]),
-            rrb.Vertical(_image("missing pixels accepted (green) / rejected (red) by the mosaic", ent.COMPLETION_ACCEPTED),
+            rrb.Vertical(_image("missing pixels accepted (green) / rejected (red) by the mosaic",
+                                ent.COMPLETION_FRAME, ent.COMPLETION_ACCEPTED),
                          _key("accepted", "mosaic"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
@@ -179,7 +181,7 @@ def inpainting_tab() -> rrb.Container:
                          _key("fmm_arrival", "arrival time"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
-            _image("filled by (eq. 25)", ent.COMPLETION_FILLED_BY),
+            _image("filled by (eq. 25)", ent.COMPLETION_FRAME, ent.COMPLETION_FILLED_BY),
             _image("completed", ent.COMPLETION_FRAME),
             rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by")),
             _note("local flow + motion inpainting"),
@@ -195,7 +197,7 @@ def deblur_tab() -> rrb.Container:
             _image("after (eq. 30)", ent.DEBLUR_AFTER),
             rrb.Vertical(_image("weights (eqs. 30-31)", ent.DEBLUR_WEIGHTS),
                          _key("deblur_weights", "weights"), row_shares=[4, 1]),
-            rrb.Vertical(_image("source per pixel (red: refused)", ent.DEBLUR_SOURCE),
+            rrb.Vertical(_image("source per pixel (red: refused)", ent.DEBLUR_AFTER, ent.DEBLUR_SOURCE),
                          _key("deblur_source", "source"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(

@@ -81,6 +81,7 @@ ROLLING_SHUTTER_BANDS = 8
 # An RGBA image's alpha is used by the viewer (rerun 0.41) only when the image's opacity is below 1: at the default
 # 1 it is drawn opaque, its transparent pixels black (checked headless). 0.99 changes the colours by 1 %.
 SEE_THROUGH = 0.99
+MASK_DRAW_ORDER = 10.0  # masks above the frame streams they are drawn over
 LABEL_COLOUR = (255, 255, 255, 255)  # stage labels: opaque white reads as dark text on a light tag (checked headless)
 VARIANCE_RANGE = visual.VARIANCE_RANGE
 ARRIVAL_RANGE = visual.ARRIVAL_RANGE
@@ -953,10 +954,10 @@ class RerunRecorder:
     def _classes(self, entity: str, classes: np.ndarray, legend: Sequence[tuple]) -> None:
         """A class map: SegmentationImage with --lossless (hover names), else a paletted PNG (a few kB)."""
         if self.lossless:
-            self.rec.log(entity, rr.SegmentationImage(classes))
+            self.rec.log(entity, rr.SegmentationImage(classes, draw_order=MASK_DRAW_ORDER))
         else:
             self.rec.log(entity, rr.EncodedImage(contents=palette_png(classes, legend), media_type="image/png",
-                                                 opacity=SEE_THROUGH))
+                                                 opacity=SEE_THROUGH, draw_order=MASK_DRAW_ORDER))
 
     def _map(self, entity: str, values: np.ndarray, colormap: str, value_range: tuple[float, float],
              shown: np.ndarray | None = None) -> None:

@@ -464,11 +464,39 @@ def test_maps_are_shown_transparent_where_they_have_no_value(compact_run, full_r
                 checked += 1
         for entity in (ent.COMPLETION_VARIANCE, ent.COMPLETION_FMM_ORDER, ent.COMPLETION_FMM_ARRIVAL):
             # The viewer draws an image of opacity 1 opaque, its transparent pixels black.
-            opacity = [v[0] if isinstance(v, list) else v for b in recording.batches[entity]
-                       if "EncodedImage:opacity" in b.schema.names for v in b.column("EncodedImage:opacity").to_pylist()
-                       if v is not None]
+            opacity = component_values(recording, entity, "EncodedImage:opacity")
             assert opacity and max(opacity) < 1.0, entity
         assert checked >= 5
+
+
+def component_values(recording, entity, column):
+    return [v[0] if isinstance(v, list) else v for b in recording.batches[entity] if column in b.schema.names
+            for v in b.column(column).to_pylist() if v is not None]
+
+
+def test_masks_are_drawn_over_their_frames_and_let_them_show(compact_run):
+    """Each mask's view holds the frame it describes, the mask above it and see-through (at opacity 1 the viewer
+    draws its transparent pixels black, hiding the video)."""
+    from ffviz import blueprint
+
+    recording = compact_run[1]
+    under = {ent.STABILIZED_MISSING: ent.STABILIZED_FRAME, ent.COMPLETION_ACCEPTED: ent.COMPLETION_FRAME,
+             ent.COMPLETION_FILLED_BY: ent.COMPLETION_FRAME, ent.DEBLUR_SOURCE: ent.DEBLUR_AFTER}
+    def views(item):
+        if isinstance(item, rr.blueprint.View):
+            yield item
+        else:
+            for inner in getattr(item, "contents", None) or []:
+                yield from views(inner)
+
+    shown_with = [list(view.contents or []) for view in views(blueprint.default_blueprint(TRACED).root_container)]
+    for mask, frame in under.items():
+        holding = [contents for contents in shown_with if f"/{mask}" in contents]
+        assert holding and all(contents.index(f"/{frame}") < contents.index(f"/{mask}") for contents in holding), mask
+    for mask in (ent.STABILIZED_MISSING, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY, ent.COMPLETION_FALLBACK):
+        opacity = component_values(recording, mask, "EncodedImage:opacity")
+        assert opacity and max(opacity) < 1.0, mask
+        assert min(component_values(recording, mask, "EncodedImage:draw_order")) > 0, mask
 
 
 def test_colour_mapped_pictures_follow_the_key():
