@@ -37,10 +37,10 @@ import cv2
 import numpy as np
 from numba import njit
 
-from pipeline.stages import fallback, fmm, local_flow, mosaic
+from pipeline.stages import fallback, fmm, local_flow, mosaic, registration
 from pipeline import geometry, imaging
 from pipeline.errors import ConfigError
-from pipeline.stages.neighbours import WarpedNeighbour, shrink, shrink_all, shrink_any
+from pipeline.stages.neighbours import WarpedNeighbour, remap_points, shrink, shrink_all, shrink_any
 
 # What filled each pixel (CompletionResult.source).
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK = 0, 1, 2, 3
@@ -48,8 +48,6 @@ SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback")
 # Distances in pixels of the local flow's working resolution (see CompletionConfig.flow_max_side).
 NEAR_MISSING_PX = 12  # motion inpainting works within this distance of the missing area (> flow's erosion)
 RESCUE_NEAR_MISSING_PX = 40  # large motions the flow missed are searched for this close to the missing area
-_ECC_MODELS = {"translation": cv2.MOTION_TRANSLATION, "affine": cv2.MOTION_AFFINE,
-               "homography": cv2.MOTION_HOMOGRAPHY}
 # ECC's iterations per neighbour: it starts from the global warp, a pixel or two off; 30 (OpenCV's usual count) made
 # ECC 60 % of full mode's time on selh_asb_1, and 10 recover the ground truth's corrections as well (docs/completion.md).
 _ECC_ITERATIONS = 10
@@ -103,8 +101,8 @@ class CompletionConfig:
             raise ConfigError(f"flow_max_side must be at least 32 px, not {self.flow_max_side}")
         if self.residual_radius < 0:
             raise ConfigError(f"residual_radius must be >= 0, not {self.residual_radius}")
-        if self.register_model is not None and self.register_model not in _ECC_MODELS:
-            raise ConfigError(f"register_model must be one of {', '.join(_ECC_MODELS)} or None, "
+        if self.register_model is not None and self.register_model not in registration.MODEL_PARAMETERS:
+            raise ConfigError(f"register_model must be one of {', '.join(registration.MODEL_PARAMETERS)} or None, "
                               f"not {self.register_model!r}")
         if self.register_band_px < 1:
             raise ConfigError(f"register_band_px must be >= 1, not {self.register_band_px}")
@@ -716,11 +714,13 @@ def register_neighbours(target: np.ndarray, missing: np.ndarray, neighbours: Seq
     The global warp of a neighbour k frames away is a chain of k inter-frame motions of a global model; near
     the frame's border, where the missing area is, the chain's error reaches pixels on far neighbours, and on
     fine texture that fails eq. 20's variance test (and makes a mosaic that changes from frame to frame).
-    For each neighbour, ECC (Evangelidis & Psarakis 2008; ``config.register_model``) fits the correction
-    ``other_from_here`` that best aligns it with frame t over frame t's known pixels within
-    ``register_band_px`` of the missing area, at most ``register_max_side`` px wide. A correction is kept only
-    when it moves no frame corner further than ``register_max_px`` and lowers the mean intensity difference on
-    that band by 5 % or more; otherwise the neighbour is returned as it was. Frame t itself (offset 0) is kept.
+    For each neighbour, ECC (Evangelidis & Psarakis 2008; ``config.register_model``; pipeline/stages/
+    registration.py) fits the correction ``other_from_here`` that best aligns it with frame t over frame t's
+    known pixels within ``register_band_px`` of the missing area, at most ``register_max_side`` px wide. A lazy
+    neighbour is looked at in its own frame (shrunk and differentiated once for all the frames it is a neighbour
+    of) through its global warp. A correction is kept only when it moves no frame corner further than
+    ``register_max_px`` and lowers the mean intensity difference on the band by 5 % or more; otherwise the
+    neighbour is returned as it was. Frame t itself (offset 0) is kept.
     """
     if not neighbours or not missing.any() or missing.all():
         return list(neighbours)
@@ -728,10 +728,7 @@ def register_neighbours(target: np.ndarray, missing: np.ndarray, neighbours: Seq
     scale = 1.0 if config.register_max_side is None else min(1.0, config.register_max_side / max(height, width))
     size = (max(round(width * scale), 8), max(round(height * scale), 8))
     reduced = size != (width, height)
-    scale_x, scale_y = size[0] / width, size[1] / height
-    # Pixel centres: full-resolution (x + 0.5) is working (x + 0.5) * scale.
-    small_from_full = np.array([[scale_x, 0.0, 0.5 * scale_x - 0.5], [0.0, scale_y, 0.5 * scale_y - 0.5],
-                                [0.0, 0.0, 1.0]])
+    small_from_full = _small_from_full(size, (width, height))
     full_from_small = np.linalg.inv(small_from_full)
     band = _dilate(missing, config.register_band_px)[0] & ~missing
     whole = (slice(0, height), slice(0, width))
@@ -739,50 +736,79 @@ def register_neighbours(target: np.ndarray, missing: np.ndarray, neighbours: Seq
         small_target, small_known = target_original.crop(whole, size)
         band = shrink_all(band, size) & small_known
     elif reduced:
-        small_target, band = shrink(target, size), shrink_all(band, size)
+        small_target, band, small_known = shrink(target, size), shrink_all(band, size), shrink_all(~missing, size)
     else:
-        small_target = target
-    target_grey = imaging.intensity(small_target)
+        small_target, small_known = target, ~missing
+    # ECC compares blurred images: the band's pixels whose blur reaches a missing (black) pixel are left out (kept,
+    # they pulled the ground truth's corrections 0.3-0.5 px off; without them they are within 0.03 px).
+    band &= cv2.GaussianBlur(small_known.astype(np.float32), (3, 3), 0, 0) >= 0.95
     if np.count_nonzero(band) < _MIN_REGISTER_PIXELS:
         return list(neighbours)
+    target_grey = imaging.intensity(small_target)
+    band_y, band_x = np.nonzero(band)
+    template = cv2.GaussianBlur(target_grey, (3, 3), 0, 0)[band_y, band_x]
+    target_values = target_grey[band_y, band_x]
     corners = np.array([[0.0, width - 1.0, 0.0, width - 1.0], [0.0, 0.0, height - 1.0, height - 1.0],
                         [1.0, 1.0, 1.0, 1.0]])
-    model = _ECC_MODELS[config.register_model]
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, _ECC_ITERATIONS, 1e-4)
     out = []
     for neighbour in neighbours:
         out.append(neighbour)
         if neighbour.offset == 0:
             continue
-        rgb, valid = neighbour.crop(whole, size if reduced else None)
-        mask = band & valid
-        if np.count_nonzero(mask) < _MIN_REGISTER_PIXELS:
+        if neighbour.original is not None:
+            original_height, original_width = neighbour.original.shape[:2]
+            source_size = (max(round(original_width * size[0] / width), 8),
+                           max(round(original_height * size[1] / height), 8))
+            image = registration.source_image(neighbour.original, source_size)
+            image_from_small = (_small_from_full(source_size, (original_width, original_height))
+                                @ neighbour.other_from_stab @ full_from_small)
+        else:
+            rgb, valid = neighbour.crop(whole, size if reduced else None)
+            image, image_from_small = registration.prepare(imaging.intensity(rgb), valid), np.eye(3)
+        before, covered = _sample_intensity(image, image_from_small, band_x, band_y)
+        if np.count_nonzero(covered) < _MIN_REGISTER_PIXELS:
             continue
-        grey = imaging.intensity(rgb)
-        warp = np.eye(3, dtype=np.float32) if model == cv2.MOTION_HOMOGRAPHY else np.eye(2, 3, dtype=np.float32)
-        try:
-            _, warp = cv2.findTransformECCWithMask(target_grey, grey, mask.view(np.uint8), valid.view(np.uint8), warp,
-                                                   model, criteria, 3)
-        except cv2.error:  # did not converge, or a degenerate update
+        # Over every band pixel: taking every other or third (selh_asb_1's band has 5-10 thousand at 320 px) made
+        # the corrections vary more from frame to frame (flicker 1.03 -> 1.10 on its first 120 frames).
+        small_correction = registration.ecc_on_points(template[covered], band_x[covered], band_y[covered], image,
+                                                      image_from_small, config.register_model, _ECC_ITERATIONS)
+        if small_correction is None:  # did not converge, or a degenerate update
             continue
-        small_correction = np.eye(3)
-        small_correction[:warp.shape[0]] = warp
         correction = full_from_small @ small_correction @ small_from_full
         moved = correction @ corners
         with np.errstate(divide="ignore", invalid="ignore"):
             moved = moved[:2] / moved[2]
         if not np.isfinite(moved).all() or np.abs(moved - corners[:2]).max() > config.register_max_px:
             continue
-        refined = neighbour.refined(correction)
-        refined_rgb, refined_valid = refined.crop(whole, size if reduced else None)
-        both = mask & refined_valid
+        after, still = _sample_intensity(image, image_from_small @ small_correction, band_x, band_y)
+        both = covered & still
         if not both.any():
             continue
-        before = float(np.abs(target_grey - grey)[both].mean())
-        after = float(np.abs(target_grey - imaging.intensity(refined_rgb))[both].mean())
-        if after < 0.95 * before:
-            out[-1] = refined
+        if np.abs(target_values - after)[both].mean() < 0.95 * np.abs(target_values - before)[both].mean():
+            out[-1] = neighbour.refined(correction)
     return out
+
+
+def _small_from_full(small: tuple[int, int], full: tuple[int, int]) -> np.ndarray:
+    """Pixel centres of an image of size ``full`` (width, height) shrunk to ``small``: full (x + 0.5) is
+    small (x + 0.5) * scale."""
+    scale_x, scale_y = small[0] / full[0], small[1] / full[1]
+    return np.array([[scale_x, 0.0, 0.5 * scale_x - 0.5], [0.0, scale_y, 0.5 * scale_y - 0.5], [0.0, 0.0, 1.0]])
+
+
+def _sample_intensity(image: registration.SourceImage, image_from_work: np.ndarray, xs: np.ndarray, ys: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The unblurred intensity of ``image`` at working points (xs, ys) through ``image_from_work`` (bilinear) and
+    whether each lands on its usable area."""
+    mapped = image_from_work @ np.stack([xs, ys, np.ones(len(xs))])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u, v = mapped[0] / mapped[2], mapped[1] / mapped[2]
+    height, width = image.usable.shape
+    inside = (u >= 0) & (v >= 0) & (u <= width - 1) & (v <= height - 1)
+    landed = np.zeros(len(xs), bool)
+    landed[inside] = image.usable[np.rint(v[inside]).astype(np.intp), np.rint(u[inside]).astype(np.intp)]
+    values = remap_points(image.intensity, np.where(landed, u, -2.0), np.where(landed, v, -2.0))[:, 0]
+    return values, landed
 
 
 def _moving_and_better(candidates: list[_Candidate], chosen: np.ndarray, static_error: np.ndarray,
