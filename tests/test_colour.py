@@ -162,6 +162,32 @@ def test_reader_and_writer_alone_keep_tags_depth_and_colour(clip, tmp_path):
     assert_faithful(path, output, kind)
 
 
+@pytest.mark.parametrize("frames", [1, 2, 3])
+def test_a_one_or_two_picture_hevc_output_is_written_every_time(frames, tmp_path):
+    """libx265 leaves the dts of a one- or two-picture video uninitialised (a different value from run to run);
+    the writer must still produce a whole file that decodes to every picture, however often it is tried."""
+    path = tmp_path / "hlg.mp4"
+    make_clip(path, "bt2020_hlg_10bit")
+    like = video_io.probe_video(path)
+    for attempt, garbage in enumerate([None, -94218684620720, -4611756388245323776, 7, None, None]):
+        output = tmp_path / f"out{attempt}.mp4"
+        with video_io.VideoWriter(output, like=like) as writer:
+            if garbage is not None:  # what libx265 hands back on a bad run, made certain
+                encode = writer._video.encode
+
+                def encode_with_garbage_dts(frame, encode=encode, garbage=garbage):
+                    packets = list(encode(frame))
+                    for packet in packets:
+                        packet.dts = garbage
+                    return packets
+
+                writer._video = dataclasses.make_dataclass("S", [("encode", object)])(encode_with_garbage_dts)
+            for t in range(frames):
+                writer.write(scene(t).astype(np.float32))
+        with av.open(str(output)) as container:
+            assert sum(1 for _ in container.decode(video=0)) == frames
+
+
 @pytest.mark.parametrize("mode", ["none", "crop", "full"])
 def test_every_mode_keeps_tags_depth_and_colour(clip, mode, tmp_path, capsys):
     kind, path = clip

@@ -702,6 +702,9 @@ class Encoding:
         return {"qmin": str(self.qscale), "qmax": str(self.qscale)}
 
 
+_MAX_REORDER_FRAMES = 16  # more than x264's or x265's B-frame delay at any preset this writer uses
+
+
 class VideoWriter:
     """Writes RGB frames (4:2:0, H.264 or for deeper input HEVC by default: ``Encoding``) with the input's
     timestamps and colour description (``like.colour``: matrix, range, tags, depth), atomically.
@@ -729,6 +732,7 @@ class VideoWriter:
         # Default spacing when write() gets no timestamp: one frame at the input's rate.
         self._frame_ticks = max(1, round(1 / (like.fps * like.time_base)))
         self._last_pts: int | None = None
+        self._last_dts: int | None = None
         # like.clip: the frames are part of a file; the output starts at the first one (its pts become 0).
         self._clipped = like.clip is not None
         self._pts_offset: int | None = None
@@ -848,12 +852,29 @@ class VideoWriter:
         frame.time_base = self._time_base
         try:
             for packet in self._video.encode(frame):
-                self._container.mux(packet)
+                self._mux_video(packet)
             if self._audio is not None:
                 self._audio.mux_until(float((pts + (self._pts_offset or 0)) * self._time_base))
         except _AV_ERRORS as error:
             self.abort()
             raise OutputError(f"cannot write {self.path}: {_reason(error)}") from None
+
+    def _mux_video(self, packet: av.Packet) -> None:
+        """Mux one encoded packet, its decoding time made sane first.
+
+        libx265 leaves a packet's dts uninitialised when the whole video is one or two pictures (seen here as 0,
+        -2 or a huge negative number from run to run), and the MP4 muxer then refuses the file. A dts is taken as
+        given when it is at or before the pts, after the previous packet's, and within ``_MAX_REORDER_FRAMES``
+        pictures of the pts (no encoder setting here reorders further); otherwise it becomes the earliest value
+        that keeps decoding order, which for these short videos is their own pts.
+        """
+        dts, pts = packet.dts, packet.pts
+        if pts is not None and (
+                dts is None or dts > pts or dts < pts - _MAX_REORDER_FRAMES * self._frame_ticks
+                or (self._last_dts is not None and dts <= self._last_dts)):
+            packet.dts = pts if self._last_dts is None else min(pts, self._last_dts + 1)
+        self._last_dts = packet.dts
+        self._container.mux(packet)
 
     def close(self) -> None:
         """Flush the encoder, mux the rest of the audio, and move the file into place."""
@@ -861,7 +882,7 @@ class VideoWriter:
             return
         try:
             for packet in self._video.encode(None):
-                self._container.mux(packet)
+                self._mux_video(packet)
             if self._audio is not None:
                 end_s = None
                 if self._clipped and self._last_pts is not None:  # the audio ends with the last frame's time
