@@ -257,6 +257,7 @@ def main() -> None:
     if not args.skip_truth:
         truth_rows(cache, only=args.only)
         save()
+    save()
     text = report(cache, args.frames)
     print(text)
     if args.report:
