@@ -12,7 +12,8 @@ missing share and the completion PSNR of the synthesized pixels. Then the L1 pro
 1000-frame shaken camera (median of 3), full and crop.
 
 Usage: nice -n 10 python benchmarks/path_choice.py [--clips a.mp4,b.avi] [--frames N] [--skip-real] [--skip-truth]
-       [--cache FILE] [--report docs/benchmarks-paths.md]
+       [--only TEXT] [--cache FILE] [--merge FILE ...] [--report docs/benchmarks-paths.md]
+(docs/benchmarks-paths.md: --frames 150, the clips split over two runs at once and merged with --merge.)
 """
 
 from __future__ import annotations
