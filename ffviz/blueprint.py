@@ -29,7 +29,10 @@ TAB_NOTES = {
                "band of rows was seen from the middle row's view (5x), and the bottom band's shift against the top's."),
     "smoothing": ("**Motion smoothing** (eq. 18, `S_t = sum G(i-t) T_t^i`) and **warping** (eq. 19, "
                   "`I'_t(p) = I_t(S_t p)`): the camera path original against smoothed; the stabilized frame and, "
-                  "in red, the area no input pixel covers (the crop window in yellow with `--mode crop`)."),
+                  "in red, the area no input pixel covers (the crop window in yellow with `--mode crop`). Each "
+                  "path view also draws eq. 18's and the L1 path on the same motion, whichever the run follows; "
+                  "with `--mode crop` the input shows the output's corners, which must stay inside it (their "
+                  "room in px is charted under the paths)."),
     "mosaic": ("**Consistent mosaic** (eqs. 20-22): where the aligned neighbours agree (variance of eq. 20 "
                "below the threshold) the missing pixel takes their mean (eq. 21-22, green); where they disagree "
                "(red) it is left to motion inpainting."),
