@@ -61,7 +61,8 @@ VARIANTS = (("gaussian k=30", "none", smoothing.SmoothingConfig(), None),
             *((f"l1 margin {m:.0%}", "none", l1(m), None) for m in MARGINS),
             ("crop gaussian k=30", "crop", smoothing.SmoothingConfig(), None),
             ("crop l1", "crop", l1(0.03), None),
-            ("crop l1 --crop-scale 0.9", "crop", l1(0.03), 0.9))
+            ("crop l1 --crop-scale 0.9", "crop", l1(0.03), 0.9),
+            ("crop l1 --crop-scale 0.95", "crop", l1(0.03), 0.95))
 
 
 def missing_share(orig_from_out: np.ndarray, width: int, height: int) -> float:
