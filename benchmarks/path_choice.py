@@ -43,6 +43,8 @@ from pipeline.stabilize import estimate_motion, stabilize
 from pipeline.stages import l1_path, smoothing
 from pipeline.stages.adaptive_crop import CropConfig
 
+from path_control import trimmed  # benchmarks/ is on sys.path when a script in it runs
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "videos"
 DEFAULT_CLIPS = ("linyihaolyh_shaky.mp4", "sudheerachary_small-shaky-5.avi", "selh_asb_1.mp4", "vplab_C.avi",
@@ -80,15 +82,6 @@ def plan_seconds(motion_pass: MotionPass, config: StabilizeConfig, width: int, h
     start = time.process_time()
     plan = plan_path(motion_pass, config, width, height)
     return plan, time.process_time() - start
-
-
-def trimmed(clip: Path, frames: int | None, folder: Path) -> Path:
-    if frames is None:
-        return clip
-    out = folder / f"{clip.stem}-{frames}.mp4"
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-frames:v", str(frames), "-fps_mode",
-                    "passthrough", "-c:v", "libx264", "-crf", "10", "-an", str(out)], check=True)
-    return out
 
 
 def vidstab(clip: Path, out: Path, work: Path) -> None:
