@@ -33,6 +33,10 @@ from pipeline.stages.neighbours import shrink
 MODEL_PARAMETERS = {"translation": 2, "affine": 6, "homography": 8}
 MIN_POINTS = 16
 _GRADIENT = np.array([[-0.5, 0.0, 0.5]], np.float32)  # OpenCV's ECC: central differences
+# the warp's (row, column) each parameter moves, in the Jacobian's order (as OpenCV's ECC orders them)
+_HOMOGRAPHY_CELLS = np.array([[0, 0], [1, 0], [2, 0], [0, 1], [1, 1], [2, 1], [0, 2], [1, 2]])
+_AFFINE_CELLS = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0, 2], [1, 2]])
+_TRANSLATION_CELLS = np.array([[0, 2], [1, 2]])
 
 
 @dataclass(frozen=True)
@@ -185,25 +189,9 @@ def _ecc(template: np.ndarray, xs: np.ndarray, ys: np.ndarray, stack: np.ndarray
             return 4
         lam = (image_norm2 - image_projection @ image_projection_h) / lambda_d
         delta = h_inv @ (lam * template_projection - image_projection)
-        if n_params == 8:
-            warp[0, 0] += delta[0]
-            warp[1, 0] += delta[1]
-            warp[2, 0] += delta[2]
-            warp[0, 1] += delta[3]
-            warp[1, 1] += delta[4]
-            warp[2, 1] += delta[5]
-            warp[0, 2] += delta[6]
-            warp[1, 2] += delta[7]
-        elif n_params == 6:
-            warp[0, 0] += delta[0]
-            warp[1, 0] += delta[1]
-            warp[0, 1] += delta[2]
-            warp[1, 1] += delta[3]
-            warp[0, 2] += delta[4]
-            warp[1, 2] += delta[5]
-        else:
-            warp[0, 2] += delta[0]
-            warp[1, 2] += delta[1]
+        cells = _HOMOGRAPHY_CELLS if n_params == 8 else _AFFINE_CELLS if n_params == 6 else _TRANSLATION_CELLS
+        for a in range(n_params):
+            warp[cells[a, 0], cells[a, 1]] += delta[a]
     return 0
 
 
