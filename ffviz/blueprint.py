@@ -67,8 +67,9 @@ def _map(name: str, entity: str) -> rrb.Spatial2DView:
 def _trajectory_view(axes: Sequence[str], unit: str) -> rrb.TimeSeriesView:
     roots = (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)
     contents = [f"/{root}/{axis}" for axis in axes for root in roots]
-    return rrb.TimeSeriesView(name=f"camera path {', '.join(axes)} ({unit}): original, smoothed (the run's), "
-                              f"eq. 18, L1", origin="/motion/trajectory", contents=contents)
+    # the lines' names are in the legend; a longer title is cut at 1280 px wide
+    return rrb.TimeSeriesView(name=f"camera paths {', '.join(axes)} ({unit})", origin="/motion/trajectory",
+                              contents=contents)
 
 
 def _traced_views(traced: Sequence[int], title: Callable[[int], str],
@@ -128,14 +129,15 @@ def motion_tab() -> rrb.Container:
     )
 
 
-def smoothing_tab() -> rrb.Container:
+def smoothing_tab(crop: bool = False) -> rrb.Container:
+    """``crop``: a --mode crop run, whose crop scale and crop-window room get charts (empty in the other modes)."""
+    crop_charts = [rrb.TimeSeriesView(name="crop scale", origin=f"/{ent.CROP_SCALE}"),
+                   rrb.TimeSeriesView(name="crop window's room in the input, px (>= 0: no black pixel)",
+                                      origin=f"/{ent.CROP_ROOM}")] if crop else []
     return rrb.Vertical(
         rrb.Horizontal(
             rrb.Vertical(_trajectory_view(("x",), "px"), _trajectory_view(("y",), "px"),
-                         _trajectory_view(("angle",), "deg"), _trajectory_view(("zoom",), "%"),
-                         rrb.TimeSeriesView(name="crop scale (--mode crop)", origin=f"/{ent.CROP_SCALE}"),
-                         rrb.TimeSeriesView(name="crop window's room inside each input frame, px (--mode crop; "
-                                            ">= 0: no black pixel)", origin=f"/{ent.CROP_ROOM}")),
+                         _trajectory_view(("angle",), "deg"), _trajectory_view(("zoom",), "%"), *crop_charts),
             rrb.Vertical(
                 _image("stabilized (eq. 19); crop window in yellow (--mode crop)", ent.STABILIZED_FRAME,
                        ent.CROP_WINDOW),
@@ -222,11 +224,12 @@ def about_tab() -> rrb.Container:
     )
 
 
-def default_blueprint(traced: Sequence[int] = ()) -> rrb.Blueprint:
-    """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each)."""
+def default_blueprint(traced: Sequence[int] = (), *, crop: bool = False) -> rrb.Blueprint:
+    """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each); ``crop``: a --mode crop
+    run (its crop charts are shown; other modes have no data for them)."""
     return rrb.Blueprint(
         rrb.Tabs(
-            overview_tab(), motion_tab(), smoothing_tab(), mosaic_tab(), inpainting_tab(), deblur_tab(),
+            overview_tab(), motion_tab(), smoothing_tab(crop), mosaic_tab(), inpainting_tab(), deblur_tab(),
             _stage_stepping_tab(traced), about_tab(),
             active_tab=0,
         ),

@@ -143,11 +143,12 @@ def trajectories(recording: Recording, requested: Sequence[int] | None = None) -
         ax.plot(smoothed_frames, smoothed, color=visual.hex_colour(visual.TRAJECTORY_COLOURS["smoothed", axis]),
                 linewidth=1.6, label="smoothed (the run's)")
         # Both planners on the same motion (PathComparison), in the recording's colours, dashed over the run's.
-        for root, label, colour in ((ent.TRAJECTORY_GAUSSIAN, "eq. 18 (gaussian)", "#78dc78"),
-                                    (ent.TRAJECTORY_L1, "L1", "#e66ee6")):
+        for root, kind, label in ((ent.TRAJECTORY_GAUSSIAN, "gaussian", "eq. 18 (gaussian)"),
+                                  (ent.TRAJECTORY_L1, "l1", "L1")):
             other_frames, other = recording.scalars(f"{root}/{axis}")
             if len(other_frames):
-                ax.plot(other_frames, other, color=colour, linewidth=1.0, linestyle="--", label=label)
+                ax.plot(other_frames, other, color=visual.hex_colour(visual.TRAJECTORY_COLOURS[kind, axis]),
+                        linewidth=1.0, linestyle="--", label=label)
         for k, (first, last, _) in enumerate(stretches):
             if k % 2:
                 ax.axvspan(first - 0.5, last + 0.5, color="0.5", alpha=0.12, linewidth=0)

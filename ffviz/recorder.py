@@ -493,7 +493,8 @@ class RerunRecorder:
             self._fps = 30.0
         self._log_meta()
         if self.live_url is not None:  # the layout from the first frame on; again once the traced frames are known
-            self.rec.send_blueprint(default_blueprint(self._trace_requested or ()), make_active=True, make_default=True)
+            self.rec.send_blueprint(default_blueprint(self._trace_requested or (), crop=self._crop_mode),
+                                    make_active=True, make_default=True)
         # Class maps: the legend as an annotation context (hover names in --lossless SegmentationImages; the
         # colours of the paletted PNGs otherwise) and as a key picture beside the views.
         for entity, legend, title in ((ent.STABILIZED_MISSING, MISSING_LEGEND, "missing area"),
@@ -525,10 +526,11 @@ class RerunRecorder:
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.SeriesLines(names="sharper neighbours used", colors=[(90, 160, 90)]),
                      static=True)
         # The comparison: eq. 18 and the L1 path on the same motion, thin, in colours of their own.
-        for root, name, colour in ((ent.TRAJECTORY_GAUSSIAN, "eq. 18 (gaussian)", (120, 220, 120)),
-                                   (ent.TRAJECTORY_L1, "L1", (230, 110, 230))):
+        for root, kind, name in ((ent.TRAJECTORY_GAUSSIAN, "gaussian", "eq. 18 (gaussian)"),
+                                 (ent.TRAJECTORY_L1, "l1", "L1")):
             for axis in ent.TRAJECTORY_AXES:
-                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", colors=[colour], widths=1.0),
+                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", widths=1.0,
+                                                              colors=[visual.TRAJECTORY_COLOURS[kind, axis]]),
                              static=True)
         self.rec.log(ent.CROP_ROOM, rr.SeriesLines(names="crop window's room inside the input (px)",
                                                    colors=[CROP_COLOUR], widths=2.0), static=True)
@@ -889,11 +891,16 @@ class RerunRecorder:
         self.traced = tuple(frames)
         self._send_blueprint()
 
+    @property
+    def _crop_mode(self) -> bool:
+        return getattr(self._config, "mode", None) == "crop"
+
     def _send_blueprint(self) -> None:
         if not self._blueprint_sent:
             self._blueprint_sent = True
             # Active too: it arrives after data, and the viewer would otherwise keep the layout it guessed from that.
-            self.rec.send_blueprint(default_blueprint(self.traced), make_active=True, make_default=True)
+            self.rec.send_blueprint(default_blueprint(self.traced, crop=self._crop_mode), make_active=True,
+                                    make_default=True)
 
     def _trace(self, stamp: Stamp, stage: str, rgb: np.ndarray) -> None:
         """Log a traced frame's image after ``stage`` on the ``stage`` timeline (frame = the traced frame)."""

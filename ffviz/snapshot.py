@@ -36,16 +36,19 @@ def tab_index(name: str) -> int:
     return matches[0]
 
 
-def traced_frames(recording: Path) -> list[int]:
-    """The frames the recording traced (their views are part of the layout)."""
+def layout_facts(recording: Path) -> tuple[list[int], bool]:
+    """What the layout depends on: the frames the recording traced (a view each), and whether it is a --mode crop
+    run (it has a crop scale: crop charts are shown)."""
     from rerun.chunk import RrdReader
 
-    found = set()
+    found, crop = set(), False
     for chunk in RrdReader(str(recording)).stream().to_chunks():
-        parts = str(chunk.entity_path).strip("/").split("/")
+        path = str(chunk.entity_path).strip("/")
+        parts = path.split("/")
         if len(parts) >= 2 and parts[0] == ent.TRACE and parts[1].isdigit():
             found.add(int(parts[1]))
-    return sorted(found)
+        crop = crop or path == ent.CROP_SCALE  # logged by --mode crop runs only (CROP_ROOM has a style in all)
+    return sorted(found), crop
 
 
 def _free_port() -> int:
@@ -70,7 +73,8 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
     index = tab_index(tab)
     output.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="ffviz-snapshot-") as folder:
-        layout = default_blueprint(traced_frames(recording))
+        traced, crop = layout_facts(recording)
+        layout = default_blueprint(traced, crop=crop)
         layout.root_container.active_tab = index
         rbl = Path(folder) / "layout.rbl"
         layout.save(APPLICATION_ID, str(rbl))

@@ -44,6 +44,11 @@ TRAJECTORY_COLOURS = {("original", "x"): (235, 80, 60), ("original", "y"): (245,
                       ("original", "angle"): (235, 80, 60), ("smoothed", "x"): (50, 130, 245),
                       ("smoothed", "y"): (60, 210, 200), ("smoothed", "angle"): (50, 130, 245),
                       ("original", "zoom"): (235, 80, 60), ("smoothed", "zoom"): (50, 130, 245)}
+# The two planners on the same motion (PathComparison), thin: eq. 18 in greens, L1 in magentas, y darker than x
+# (x and y share one chart in the viewer).
+for _axis in ("x", "angle", "zoom"):
+    TRAJECTORY_COLOURS["gaussian", _axis], TRAJECTORY_COLOURS["l1", _axis] = (120, 220, 120), (230, 110, 230)
+TRAJECTORY_COLOURS["gaussian", "y"], TRAJECTORY_COLOURS["l1", "y"] = (30, 150, 80), (150, 70, 210)
 VARIANCE_RANGE = (0.0, 400.0)  # intensity^2: the variance map's colour range (4x the default threshold)
 ARRIVAL_RANGE = (0.0, 60.0)  # px
 

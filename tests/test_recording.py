@@ -15,7 +15,7 @@ import pytest
 import rerun as rr
 
 import ffviz
-from ffviz import entities as ent, trace, visual
+from ffviz import entities as ent, snapshot, trace, visual
 from ffviz.recorder import FILLED_BY_BASE, WEIGHTS_STEP, RerunRecorder
 from ffviz.rrd import Recording
 from ffviz.viewer import rerun_executable
@@ -544,6 +544,31 @@ def test_crop_mode_records_the_crop_window(clip, tmp_path):
     np.testing.assert_allclose(centre - size / 2, [crop.x0, crop.y0], atol=1e-3)
     meta = recording.texts(ent.META, "TextDocument:text")[-1]
     assert "crop window" in meta and f"{crop.scale:.3f}" in meta
+    assert snapshot.layout_facts(rrd)[1]  # the layout shows the crop charts for this recording
+
+
+def _chart_origins(bp) -> set[str]:
+    import rerun.blueprint as rrb
+
+    def walk(item):
+        if isinstance(item, rrb.TimeSeriesView):
+            yield str(item.origin).strip("/")
+        for inner in getattr(item, "contents", None) or []:
+            if not isinstance(inner, str):
+                yield from walk(inner)
+
+    return set(walk(bp.root_container))
+
+
+def test_crop_charts_appear_for_crop_runs_only_so_no_panel_stays_empty(compact_run):
+    from ffviz import blueprint
+
+    crop_charts = {ent.CROP_SCALE, ent.CROP_ROOM}
+    assert crop_charts <= _chart_origins(blueprint.default_blueprint(TRACED, crop=True))
+    assert not crop_charts & _chart_origins(blueprint.default_blueprint(TRACED))
+    rrd, recording, _ = compact_run
+    assert snapshot.layout_facts(rrd) == (sorted(TRACED), False)  # a full-mode run: no crop charts
+    assert not len(recording.scalars(ent.CROP_SCALE)[0]) and not len(recording.scalars(ent.CROP_ROOM)[0])
 
 
 def test_blueprint_opens_on_frame_0_paused_with_the_overview_first():
@@ -616,8 +641,8 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
     _, recording, _ = compact_run
     series = [f"{ent.MOTION_PARAMS}/{name}" for name in ent.MOTION_PARAM_NAMES]
     series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
-    series += [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)
-               for axis in ent.TRAJECTORY_AXES]
+    paths = (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)
+    series += [f"{root}/{axis}" for root in paths for axis in ent.TRAJECTORY_AXES]
     series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback")]
     series += [ent.DEBLUR_BLURRINESS, ent.DEBLUR_NEIGHBOURS, ent.DEBLUR_REFUSED]
     styles = {}
@@ -630,8 +655,8 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
     # Lines drawn in one chart never share a colour.
     charts = [[f"{ent.COMPLETION_STATS}/{n}" for n in ("missing", "mosaic", "local_warp", "fallback")],
               [f"{ent.MOTION_PARAMS}/{n}" for n in ent.MOTION_PARAM_NAMES],
-              [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED) for axis in ("x", "y")],
-              [f"{root}/angle" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)]]
+              [f"{root}/{axis}" for root in paths for axis in ("x", "y")],
+              [f"{root}/angle" for root in paths]]
     for chart in charts:
         assert len({styles[e][1] for e in chart}) == len(chart), chart
         assert len({styles[e][0] for e in chart}) == len(chart), chart
