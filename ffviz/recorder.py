@@ -1050,7 +1050,7 @@ class RerunRecorder:
                      "frame streams as H.264 video, masks as lossless PNG, maps as colour-mapped PNG with their "
                      "values as 16-bit PNG"))
         if config is not None:
-            lines += ["", "## Settings", ""] + [f"- {row}" for row in _config_rows(config)]
+            lines += ["", "## Settings", ""] + [f"- {row}" for row in _settings_summary(config)]
         if crop is not None and hasattr(crop, "scales"):  # --crop adaptive
             lines.append(f"- adaptive crop: scale {crop.scales.min():.3f}-{crop.scales.max():.3f} about "
                          f"({crop.anchor[0]:.1f}, {crop.anchor[1]:.1f}), {crop.cropping_ratio:.1%} of the area kept "
@@ -1069,6 +1069,8 @@ class RerunRecorder:
         else:
             lines.append("- running (or interrupted): timings are written when the run finishes")
         lines.append(f"- warnings: {warnings}" + (" (listed below)" if warnings else ""))
+        if config is not None:
+            lines += ["", "## All settings", ""] + [f"- {row}" for row in _config_rows(config)]
         return "\n".join(lines) + "\n"
 
     def close(self) -> None:
@@ -1099,6 +1101,53 @@ class RerunRecorder:
         self._closed = True
         self.rec.disconnect()
         self._tmp_path.unlink(missing_ok=True)
+
+
+_MODE_WORDS = {"full": "full frame: stabilize, then complete the missing area (chapter 4)",
+               "crop": "crop: stabilize, then crop to a window every frame covers",
+               "none": "stabilize only: the missing area stays black"}
+
+
+def _settings_summary(config: Any) -> list[str]:
+    """The run's settings in a few words, then each setting that differs from the defaults (`section.name`)."""
+    import dataclasses
+
+    if not dataclasses.is_dataclass(config):
+        return [f"`{config}`"]
+    rows = []
+    mode = getattr(config, "mode", None)
+    if mode is not None:
+        rows.append(f"mode: {_MODE_WORDS.get(mode, mode)}")
+    smoothing = getattr(config, "smoothing", None)
+    if smoothing is not None:
+        rows.append("camera path: " + ("eq. 18, Gaussian over k = {} frames each side".format(smoothing.radius_frames)
+                                       if smoothing.path == "gaussian" else f"{smoothing.path} (L1 program)"))
+    deblur = getattr(config, "deblur", None)
+    if mode == "full" and deblur is not None:
+        rows.append("deblurring: " + (f"on, from neighbours {deblur.min_ratio:g}x sharper within "
+                                      f"{deblur.neighbour_frames} frames" if deblur.enabled else "off"))
+    try:
+        defaults = type(config)()
+    except (TypeError, ValueError):
+        defaults = None
+    changed = [] if defaults is None else _changed_settings(config, defaults)
+    if defaults is not None:
+        rows.append("changed from the defaults: " + (", ".join(f"`{name} = {value!r}`" for name, value in changed)
+                                                    if changed else "nothing"))
+    return rows
+
+
+def _changed_settings(config: Any, defaults: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    import dataclasses
+
+    changed = []
+    for field in dataclasses.fields(config):
+        value, default = getattr(config, field.name), getattr(defaults, field.name, None)
+        if dataclasses.is_dataclass(value) and type(value) is type(default):
+            changed += _changed_settings(value, default, f"{prefix}{field.name}.")
+        elif value != default:
+            changed.append((f"{prefix}{field.name}", value))
+    return changed
 
 
 def _config_rows(config: Any) -> list[str]:

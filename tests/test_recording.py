@@ -589,9 +589,27 @@ def test_about_tab_is_a_readable_summary(compact_run):
     _, recording, collector = compact_run
     meta = recording.texts(ent.META, "TextDocument:text")[-1]
     assert meta.startswith("# About this recording")
-    assert "## Settings" in meta and "**smoothing**" in meta
+    assert "## Settings" in meta and "**smoothing**" in meta.split("## All settings")[1]
+    settings = meta.split("## Settings")[1].split("##")[0]
+    assert "- mode: full frame" in settings and "k = 30 frames" in settings
+    assert "- changed from the defaults: nothing" in settings  # the fixture runs StabilizeConfig(mode="full")
     assert f"- warnings: {len(collector.warnings)}" in meta
     assert "frames in" in meta and "render pass" in meta
+
+
+def test_about_tab_names_the_settings_that_differ_from_the_defaults():
+    import dataclasses
+
+    from pipeline.stages.deblur import DeblurConfig
+    from pipeline.stages.smoothing import SmoothingConfig
+
+    config = StabilizeConfig(mode="crop", smoothing=SmoothingConfig(radius_frames=12),
+                             deblur=dataclasses.replace(DeblurConfig(), enabled=False))
+    meta = RerunRecorder._meta_markdown(None, config)
+    settings = meta.split("## Settings")[1].split("##")[0]
+    assert "- mode: crop" in settings and "k = 12 frames" in settings
+    assert "`smoothing.radius_frames = 12`" in settings and "`deblur.enabled = False`" in settings
+    assert "`mode = 'crop'`" in settings and "motion." not in settings
 
 
 def test_live_view_and_file_at_once(clip, tmp_path):
