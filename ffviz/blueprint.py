@@ -106,7 +106,10 @@ def overview_tab() -> rrb.Container:
     )
 
 
-def motion_tab() -> rrb.Container:
+def motion_tab(rolling_shutter: bool = False) -> rrb.Container:
+    """``rolling_shutter``: a --rolling-shutter run, whose skew gets a chart (empty otherwise)."""
+    skew_chart = [rrb.TimeSeriesView(name="rolling shutter: bottom band's shift against the top's (px)",
+                                     origin=f"/{ent.ROLLING_SHUTTER_SKEW}")] if rolling_shutter else []
     return rrb.Vertical(
         rrb.Horizontal(
             _image("input + tracked features (green inliers, red outliers)", ent.INPUT_FRAME, f"{ent.MOTION_FEATURES}/**"),
@@ -118,9 +121,8 @@ def motion_tab() -> rrb.Container:
                     rrb.TimeSeriesView(name="inlier ratio", origin=f"/{ent.MOTION_INLIER_RATIO}"),
                     rrb.TimeSeriesView(name="residual (px)", origin=f"/{ent.MOTION_RESIDUAL}"),
                 ),
-                rrb.TimeSeriesView(name="rolling shutter (--rolling-shutter): bottom band's shift against the top's (px)",
-                                   origin=f"/{ent.ROLLING_SHUTTER_SKEW}"),
-                row_shares=[3, 2, 2],
+                *skew_chart,
+                row_shares=[3, 2, 2][:2 + len(skew_chart)],
             ),
         ),
         _note("motion"),
@@ -224,12 +226,14 @@ def about_tab() -> rrb.Container:
     )
 
 
-def default_blueprint(traced: Sequence[int] = (), *, crop: bool = False) -> rrb.Blueprint:
-    """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each); ``crop``: a --mode crop
-    run (its crop charts are shown; other modes have no data for them)."""
+def default_blueprint(traced: Sequence[int] = (), *, crop: bool = False,
+                      rolling_shutter: bool = False) -> rrb.Blueprint:
+    """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each); ``crop`` / ``rolling_shutter``:
+    a --mode crop / --rolling-shutter run (their charts are shown; other runs have no data for them, and an empty
+    panel reads as a fault)."""
     return rrb.Blueprint(
         rrb.Tabs(
-            overview_tab(), motion_tab(), smoothing_tab(crop), mosaic_tab(), inpainting_tab(), deblur_tab(),
+            overview_tab(), motion_tab(rolling_shutter), smoothing_tab(crop), mosaic_tab(), inpainting_tab(), deblur_tab(),
             _stage_stepping_tab(traced), about_tab(),
             active_tab=0,
         ),

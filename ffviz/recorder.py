@@ -493,7 +493,7 @@ class RerunRecorder:
             self._fps = 30.0
         self._log_meta()
         if self.live_url is not None:  # the layout from the first frame on; again once the traced frames are known
-            self.rec.send_blueprint(default_blueprint(self._trace_requested or (), crop=self._crop_mode),
+            self.rec.send_blueprint(default_blueprint(self._trace_requested or (), **self._layout_flags),
                                     make_active=True, make_default=True)
         # Class maps: the legend as an annotation context (hover names in --lossless SegmentationImages; the
         # colours of the paletted PNGs otherwise) and as a key picture beside the views.
@@ -892,14 +892,16 @@ class RerunRecorder:
         self._send_blueprint()
 
     @property
-    def _crop_mode(self) -> bool:
-        return getattr(self._config, "mode", None) == "crop"
+    def _layout_flags(self) -> dict[str, bool]:
+        """The run's options that add views to the layout (blueprint.default_blueprint's flags)."""
+        return {"crop": getattr(self._config, "mode", None) == "crop",
+                "rolling_shutter": getattr(self._config, "rolling_shutter", None) is not None}
 
     def _send_blueprint(self) -> None:
         if not self._blueprint_sent:
             self._blueprint_sent = True
             # Active too: it arrives after data, and the viewer would otherwise keep the layout it guessed from that.
-            self.rec.send_blueprint(default_blueprint(self.traced, crop=self._crop_mode), make_active=True,
+            self.rec.send_blueprint(default_blueprint(self.traced, **self._layout_flags), make_active=True,
                                     make_default=True)
 
     def _trace(self, stamp: Stamp, stage: str, rgb: np.ndarray) -> None:

@@ -36,19 +36,20 @@ def tab_index(name: str) -> int:
     return matches[0]
 
 
-def layout_facts(recording: Path) -> tuple[list[int], bool]:
-    """What the layout depends on: the frames the recording traced (a view each), and whether it is a --mode crop
-    run (it has a crop scale: crop charts are shown)."""
+def layout_facts(recording: Path) -> tuple[list[int], dict[str, bool]]:
+    """What the layout depends on: the frames the recording traced (a view each), and default_blueprint's flags
+    for the options the run used (told by data only those runs log: a crop scale, a rolling-shutter skew)."""
     from rerun.chunk import RrdReader
 
-    found, crop = set(), False
+    found, flags = set(), {"crop": False, "rolling_shutter": False}
     for chunk in RrdReader(str(recording)).stream().to_chunks():
         path = str(chunk.entity_path).strip("/")
         parts = path.split("/")
         if len(parts) >= 2 and parts[0] == ent.TRACE and parts[1].isdigit():
             found.add(int(parts[1]))
-        crop = crop or path == ent.CROP_SCALE  # logged by --mode crop runs only (CROP_ROOM has a style in all)
-    return sorted(found), crop
+        flags["crop"] = flags["crop"] or path == ent.CROP_SCALE  # (CROP_ROOM has a style in every recording)
+        flags["rolling_shutter"] = flags["rolling_shutter"] or path.startswith(ent.ROLLING_SHUTTER_SKEW + "/")
+    return sorted(found), flags
 
 
 def _free_port() -> int:
@@ -73,8 +74,8 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
     index = tab_index(tab)
     output.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="ffviz-snapshot-") as folder:
-        traced, crop = layout_facts(recording)
-        layout = default_blueprint(traced, crop=crop)
+        traced, flags = layout_facts(recording)
+        layout = default_blueprint(traced, **flags)
         layout.root_container.active_tab = index
         rbl = Path(folder) / "layout.rbl"
         layout.save(APPLICATION_ID, str(rbl))

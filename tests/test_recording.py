@@ -544,7 +544,7 @@ def test_crop_mode_records_the_crop_window(clip, tmp_path):
     np.testing.assert_allclose(centre - size / 2, [crop.x0, crop.y0], atol=1e-3)
     meta = recording.texts(ent.META, "TextDocument:text")[-1]
     assert "crop window" in meta and f"{crop.scale:.3f}" in meta
-    assert snapshot.layout_facts(rrd)[1]  # the layout shows the crop charts for this recording
+    assert snapshot.layout_facts(rrd)[1] == {"crop": True, "rolling_shutter": False}  # its layout has crop charts
 
 
 def _chart_origins(bp) -> set[str]:
@@ -560,14 +560,15 @@ def _chart_origins(bp) -> set[str]:
     return set(walk(bp.root_container))
 
 
-def test_crop_charts_appear_for_crop_runs_only_so_no_panel_stays_empty(compact_run):
+def test_option_charts_appear_for_runs_with_the_option_only_so_no_panel_stays_empty(compact_run):
     from ffviz import blueprint
 
-    crop_charts = {ent.CROP_SCALE, ent.CROP_ROOM}
+    crop_charts, skew_chart = {ent.CROP_SCALE, ent.CROP_ROOM}, {ent.ROLLING_SHUTTER_SKEW}
     assert crop_charts <= _chart_origins(blueprint.default_blueprint(TRACED, crop=True))
-    assert not crop_charts & _chart_origins(blueprint.default_blueprint(TRACED))
+    assert skew_chart <= _chart_origins(blueprint.default_blueprint(TRACED, rolling_shutter=True))
+    assert not (crop_charts | skew_chart) & _chart_origins(blueprint.default_blueprint(TRACED))
     rrd, recording, _ = compact_run
-    assert snapshot.layout_facts(rrd) == (sorted(TRACED), False)  # a full-mode run: no crop charts
+    assert snapshot.layout_facts(rrd) == (sorted(TRACED), {"crop": False, "rolling_shutter": False})
     assert not len(recording.scalars(ent.CROP_SCALE)[0]) and not len(recording.scalars(ent.CROP_ROOM)[0])
 
 
@@ -794,6 +795,7 @@ def test_every_entity_of_the_field_table_is_in_a_recording(full_run, clip, tmp_p
     options = StabilizeConfig(mode="crop", rolling_shutter=0.5,
                               motion=MotionConfig(ignore=(IgnoreRegion(10, 10, 60, 40),)))
     stabilize(clip, None, options, observer=RerunRecorder(crop_rrd, level="full"))
+    assert snapshot.layout_facts(crop_rrd)[1] == {"crop": True, "rolling_shutter": True}  # their charts are shown
     entities = set(full_run[0].entities) | set(Recording.load(crop_rrd).entities)
     timelines = {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}
     named = {path for row in RECORDED_FIELDS.values() for target in row.values()
