@@ -217,24 +217,26 @@ def deblur_tab() -> rrb.Container:
     )
 
 
-def about_tab() -> rrb.Container:
+def about_tab(log: bool = True) -> rrb.Container:
+    """``log``: the run logged warnings or notes (their table is shown; without any it would be an empty panel)."""
+    log_view = [rrb.TextLogView(name="warnings and notes", origin=f"/{ent.LOG}")] if log else []
     return rrb.Vertical(
         rrb.TextDocumentView(name="about this run", origin=f"/{ent.META}"),
-        rrb.TextLogView(name="warnings", origin=f"/{ent.LOG}"),
-        row_shares=[3, 1],
+        *log_view,
+        row_shares=[3, 1][:1 + len(log_view)],
         name="about",
     )
 
 
-def default_blueprint(traced: Sequence[int] = (), *, crop: bool = False,
-                      rolling_shutter: bool = False) -> rrb.Blueprint:
+def default_blueprint(traced: Sequence[int] = (), *, crop: bool = False, rolling_shutter: bool = False,
+                      log: bool = True) -> rrb.Blueprint:
     """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each); ``crop`` / ``rolling_shutter``:
     a --mode crop / --rolling-shutter run (their charts are shown; other runs have no data for them, and an empty
-    panel reads as a fault)."""
+    panel reads as a fault); ``log``: the run logged warnings or notes (their table is shown)."""
     return rrb.Blueprint(
         rrb.Tabs(
             overview_tab(), motion_tab(rolling_shutter), smoothing_tab(crop), mosaic_tab(), inpainting_tab(), deblur_tab(),
-            _stage_stepping_tab(traced), about_tab(),
+            _stage_stepping_tab(traced), about_tab(log),
             active_tab=0,
         ),
         # Opens on frame 0, paused (without play_state the viewer starts on the last frame, playing).

@@ -432,6 +432,7 @@ class RerunRecorder:
         self._crop: Any = None
         self._adaptive: AdaptiveCrop | None = None
         self._warnings = 0
+        self._log_lines = 0  # lines logged to ent.LOG (warnings and notes): the about tab's table only when any
         self._started = time.perf_counter()
         self._cpu_started = time.process_time()
         self.seconds_logging = 0.0  # wall time the recorder spent encoding and logging (on its own thread)
@@ -587,6 +588,10 @@ class RerunRecorder:
     def on_frame(self, result: FrameResult) -> None:
         self._submit(self._timed, self._on_frame, result)
 
+    def _log_line(self, line: rr.TextLog, static: bool = False) -> None:
+        self._log_lines += 1
+        self.rec.log(ent.LOG, line, static=static)
+
     def _timed(self, handler, *args) -> None:
         started = time.perf_counter()
         handler(*args)
@@ -599,7 +604,7 @@ class RerunRecorder:
         self._warnings += 1
         if stamp is not None:
             self._set_time(stamp)
-        self.rec.log(ent.LOG, rr.TextLog(message, level=rr.TextLogLevel.WARN), static=stamp is None)
+        self._log_line(rr.TextLog(message, level=rr.TextLogLevel.WARN), static=stamp is None)
 
     def on_finish(self, report: Any) -> None:
         self._submit(self._log_meta, report)
@@ -633,7 +638,7 @@ class RerunRecorder:
         """The other motion's tracks (a moving object's, or the RANSAC winner's when that was the object), orange
         over the green and red ones (full level), and a log line where the camera took the other motion."""
         if estimate.chose_alternative:
-            self.rec.log(ent.LOG, rr.TextLog("the tracks most agree on move with a foreground object: the camera "
+            self._log_line(rr.TextLog("the tracks most agree on move with a foreground object: the camera "
                                              "follows the other motion (orange: the object's)",
                                              level=rr.TextLogLevel.INFO))
         if self.level != "full":
@@ -664,7 +669,7 @@ class RerunRecorder:
         """--rolling-shutter: the readout time (log), each frame's bottom band shifted against its top band (series)
         and, at full level, arrows from every band's middle-row position to where its rows saw it (x5)."""
         width, height = self._size
-        self.rec.log(ent.LOG, rr.TextLog(f"rolling shutter: readout {correction.readout:.2f} of the frame interval",
+        self._log_line(rr.TextLog(f"rolling shutter: readout {correction.readout:.2f} of the frame interval",
                                          level=rr.TextLogLevel.INFO), static=True)
         frames = np.arange(len(correction.rows))
         xs = np.linspace(0.1, 0.9, 5) * (width - 1)
@@ -774,7 +779,7 @@ class RerunRecorder:
         else:
             beyond = [t for t in self._trace_requested if t >= n]
             if beyond:
-                self.rec.log(ent.LOG, rr.TextLog(f"traced frame(s) {', '.join(map(str, beyond))} not in the clip's {n} "
+                self._log_line(rr.TextLog(f"traced frame(s) {', '.join(map(str, beyond))} not in the clip's {n} "
                                                  "frames: not traced", level=rr.TextLogLevel.WARN), static=True)
             self._set_traced([t for t in self._trace_requested if t < n])
 
@@ -889,16 +894,19 @@ class RerunRecorder:
 
     def _set_traced(self, frames: Sequence[int]) -> None:
         self.traced = tuple(frames)
-        self._send_blueprint()
+        if self.live_url is not None:  # a file is read whole: its layout is sent once, at the end
+            self._send_blueprint()
 
     @property
     def _layout_flags(self) -> dict[str, bool]:
         """The run's options that add views to the layout (blueprint.default_blueprint's flags)."""
         return {"crop": getattr(self._config, "mode", None) == "crop",
-                "rolling_shutter": getattr(self._config, "rolling_shutter", None) is not None}
+                "rolling_shutter": getattr(self._config, "rolling_shutter", None) is not None,
+                "log": self._log_lines > 0 or not self._closed}  # while running, lines may still come
 
     def _send_blueprint(self) -> None:
-        if not self._blueprint_sent:
+        """The layout, once the traced frames are known (live) and again, final, at the end."""
+        if self._closed or not self._blueprint_sent:
             self._blueprint_sent = True
             # Active too: it arrives after data, and the viewer would otherwise keep the layout it guessed from that.
             self.rec.send_blueprint(default_blueprint(self.traced, **self._layout_flags), make_active=True,

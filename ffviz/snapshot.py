@@ -38,10 +38,11 @@ def tab_index(name: str) -> int:
 
 def layout_facts(recording: Path) -> tuple[list[int], dict[str, bool]]:
     """What the layout depends on: the frames the recording traced (a view each), and default_blueprint's flags
-    for the options the run used (told by data only those runs log: a crop scale, a rolling-shutter skew)."""
+    for the options the run used and its log (told by data only those runs have: a crop scale, a rolling-shutter
+    skew, log lines)."""
     from rerun.chunk import RrdReader
 
-    found, flags = set(), {"crop": False, "rolling_shutter": False}
+    found, flags = set(), {"crop": False, "rolling_shutter": False, "log": False}
     for chunk in RrdReader(str(recording)).stream().to_chunks():
         path = str(chunk.entity_path).strip("/")
         parts = path.split("/")
@@ -49,6 +50,7 @@ def layout_facts(recording: Path) -> tuple[list[int], dict[str, bool]]:
             found.add(int(parts[1]))
         flags["crop"] = flags["crop"] or path == ent.CROP_SCALE  # (CROP_ROOM has a style in every recording)
         flags["rolling_shutter"] = flags["rolling_shutter"] or path.startswith(ent.ROLLING_SHUTTER_SKEW + "/")
+        flags["log"] = flags["log"] or path == ent.LOG
     return sorted(found), flags
 
 

@@ -544,14 +544,14 @@ def test_crop_mode_records_the_crop_window(clip, tmp_path):
     np.testing.assert_allclose(centre - size / 2, [crop.x0, crop.y0], atol=1e-3)
     meta = recording.texts(ent.META, "TextDocument:text")[-1]
     assert "crop window" in meta and f"{crop.scale:.3f}" in meta
-    assert snapshot.layout_facts(rrd)[1] == {"crop": True, "rolling_shutter": False}  # its layout has crop charts
+    assert snapshot.layout_facts(rrd)[1]["crop"]  # its layout has crop charts
 
 
 def _chart_origins(bp) -> set[str]:
     import rerun.blueprint as rrb
 
     def walk(item):
-        if isinstance(item, rrb.TimeSeriesView):
+        if isinstance(item, (rrb.TimeSeriesView, rrb.TextLogView)):
             yield str(item.origin).strip("/")
         for inner in getattr(item, "contents", None) or []:
             if not isinstance(inner, str):
@@ -567,9 +567,20 @@ def test_option_charts_appear_for_runs_with_the_option_only_so_no_panel_stays_em
     assert crop_charts <= _chart_origins(blueprint.default_blueprint(TRACED, crop=True))
     assert skew_chart <= _chart_origins(blueprint.default_blueprint(TRACED, rolling_shutter=True))
     assert not (crop_charts | skew_chart) & _chart_origins(blueprint.default_blueprint(TRACED))
-    rrd, recording, _ = compact_run
-    assert snapshot.layout_facts(rrd) == (sorted(TRACED), {"crop": False, "rolling_shutter": False})
+    assert ent.LOG in _chart_origins(blueprint.default_blueprint(TRACED, log=True))
+    assert ent.LOG not in _chart_origins(blueprint.default_blueprint(TRACED, log=False))
+    rrd, recording, collector = compact_run
+    log = bool(recording.batches.get(ent.LOG))
+    assert log == bool(collector.warnings)  # this clip's run notes nothing but its warnings
+    assert snapshot.layout_facts(rrd) == (sorted(TRACED), {"crop": False, "rolling_shutter": False, "log": log})
     assert not len(recording.scalars(ent.CROP_SCALE)[0]) and not len(recording.scalars(ent.CROP_ROOM)[0])
+    layout = _embedded_layout(rrd)  # the recorder's own layout says the same
+    assert ("warnings and notes" in layout) == log and "crop scale" not in layout and "frame 5: stages" in layout
+
+
+def _embedded_layout(rrd) -> str:
+    return subprocess.run([rerun_executable(), "rrd", "print", "-vvv", str(rrd)], capture_output=True, text=True,
+                          env=dict(os.environ, RERUN_ANALYTICS="0"), check=True).stdout
 
 
 def test_blueprint_opens_on_frame_0_paused_with_the_overview_first():
@@ -795,7 +806,10 @@ def test_every_entity_of_the_field_table_is_in_a_recording(full_run, clip, tmp_p
     options = StabilizeConfig(mode="crop", rolling_shutter=0.5,
                               motion=MotionConfig(ignore=(IgnoreRegion(10, 10, 60, 40),)))
     stabilize(clip, None, options, observer=RerunRecorder(crop_rrd, level="full"))
-    assert snapshot.layout_facts(crop_rrd)[1] == {"crop": True, "rolling_shutter": True}  # their charts are shown
+    # their charts are shown, and the log (the readout time is logged)
+    assert snapshot.layout_facts(crop_rrd)[1] == {"crop": True, "rolling_shutter": True, "log": True}
+    layout = _embedded_layout(crop_rrd)  # the recorder's own layout says the same
+    assert "crop scale" in layout and "rolling shutter:" in layout and "warnings and notes" in layout
     entities = set(full_run[0].entities) | set(Recording.load(crop_rrd).entities)
     timelines = {ent.FRAME_TIMELINE, ent.VIDEO_TIME_TIMELINE}
     named = {path for row in RECORDED_FIELDS.values() for target in row.values()
