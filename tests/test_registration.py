@@ -133,3 +133,27 @@ def test_registration_at_a_reduced_working_resolution_recovers_each_neighbours_e
                 / np.abs(after.rgb.astype(np.float32) - truth)[missing & after.valid].mean())
         # measured 1.40 (offset 1: 0.6 px off, near the noise and resampling floor) to 4.64 (offset 5)
         assert gain > (3.0 if abs(before.offset) >= 3 else 1.25), (before.offset, gain)
+
+
+def test_the_source_cache_forgets_a_frame_from_inside_its_own_lock():
+    """A weak reference's callback runs wherever the garbage collector runs, including under the cache's lock on
+    the same thread (this deadlocked a full-mode run): forgetting must not wait for a lock its thread holds."""
+    import threading
+
+    from pipeline.stages.registration import _SourceCache
+
+    cache = _SourceCache()
+    frame = np.zeros((40, 60, 3), np.uint8)
+    cache.get(frame, (30, 20))
+    key = next(iter(cache._entries))
+
+    def forget_under_the_lock():
+        with cache._lock:
+            cache._entries[key] = (lambda: None, cache._entries[key][1])  # as if its frame had just been freed
+            cache._forget(key)
+
+    worker = threading.Thread(target=forget_under_the_lock, daemon=True)
+    worker.start()
+    worker.join(timeout=10)
+    assert not worker.is_alive(), "forgetting under the lock deadlocked"
+    assert len(cache) == 0

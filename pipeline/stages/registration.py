@@ -69,7 +69,9 @@ class _SourceCache:
 
     def __init__(self) -> None:
         self._entries: dict[tuple[int, tuple[int, int]], tuple[weakref.ref, SourceImage]] = {}
-        self._lock = threading.Lock()
+        # Re-entrant: a weak reference's callback (_forget) runs wherever the garbage collector happens to run,
+        # which can be inside this lock on the same thread (an allocation under it); a plain lock deadlocks there.
+        self._lock = threading.RLock()
 
     def get(self, original: np.ndarray, size: tuple[int, int]) -> SourceImage:
         key = (id(original), size)
