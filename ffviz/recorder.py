@@ -10,6 +10,7 @@ are also logged stage by stage on the ``stage`` timeline and their Fast Marching
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 import queue
@@ -526,22 +527,18 @@ class RerunRecorder:
         self.rec.log(ent.DEBLUR_BLURRINESS, rr.SeriesLines(names="blurriness b_t", colors=[(200, 80, 200)]), static=True)
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.SeriesLines(names="sharper neighbours used", colors=[(90, 160, 90)]),
                      static=True)
-        # The comparison: eq. 18 and the L1 path on the same motion, thin, in colours of their own.
-        for root, kind, name in ((ent.TRAJECTORY_GAUSSIAN, "gaussian", "eq. 18 (gaussian)"),
-                                 (ent.TRAJECTORY_L1, "l1", "L1")):
-            for axis in ent.TRAJECTORY_AXES:
-                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", widths=1.0,
-                                                              colors=[visual.TRAJECTORY_COLOURS[kind, axis]]),
-                             static=True)
         self.rec.log(ent.CROP_ROOM, rr.SeriesLines(names="crop window's room inside the input (px)",
                                                    colors=[CROP_COLOUR], widths=2.0), static=True)
-        # Original in warm colours, smoothed in cool ones; x and y told apart within each.
-        colours = visual.TRAJECTORY_COLOURS
-        for name in ("original", "smoothed"):
-            root = ent.TRAJECTORY_ORIGINAL if name == "original" else ent.TRAJECTORY_SMOOTHED
+        # Original in warm colours, smoothed in cool ones; eq. 18's and the L1 path on the same motion thin, in
+        # colours of their own; x and y told apart within each (visual.TRAJECTORY_COLOURS).
+        for root, kind, name, width in ((ent.TRAJECTORY_ORIGINAL, "original", "original", 2.0),
+                                        (ent.TRAJECTORY_SMOOTHED, "smoothed", "smoothed", 2.0),
+                                        (ent.TRAJECTORY_GAUSSIAN, "gaussian", "eq. 18 (gaussian)", 1.0),
+                                        (ent.TRAJECTORY_L1, "l1", "L1", 1.0)):
             for axis in ent.TRAJECTORY_AXES:
-                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", colors=[colours[name, axis]],
-                                                              widths=2.0), static=True)
+                self.rec.log(f"{root}/{axis}", rr.SeriesLines(names=f"{axis} {name}", widths=width,
+                                                              colors=[visual.TRAJECTORY_COLOURS[kind, axis]]),
+                             static=True)
 
     def _log_keys(self) -> None:
         """Colour keys (static pictures) for every colour-mapped entity, and the tabs' notes."""
@@ -639,8 +636,7 @@ class RerunRecorder:
         over the green and red ones (full level), and a log line where the camera took the other motion."""
         if estimate.chose_alternative:
             self._log_line(rr.TextLog("the tracks most agree on move with a foreground object: the camera "
-                                             "follows the other motion (orange: the object's)",
-                                             level=rr.TextLogLevel.INFO))
+                                      "follows the other motion (orange: the object's)", level=rr.TextLogLevel.INFO))
         if self.level != "full":
             return
         points = estimate.alternative_curr_points
@@ -670,7 +666,7 @@ class RerunRecorder:
         and, at full level, arrows from every band's middle-row position to where its rows saw it (x5)."""
         width, height = self._size
         self._log_line(rr.TextLog(f"rolling shutter: readout {correction.readout:.2f} of the frame interval",
-                                         level=rr.TextLogLevel.INFO), static=True)
+                                  level=rr.TextLogLevel.INFO), static=True)
         frames = np.arange(len(correction.rows))
         xs = np.linspace(0.1, 0.9, 5) * (width - 1)
         skew = []
@@ -683,9 +679,7 @@ class RerunRecorder:
                 self._set_time(Stamp(int(t), self._times.get(int(t), 0.0)))
                 self.rec.log(ent.ROLLING_SHUTTER_BANDS, rr.Arrows2D(
                     origins=origins, vectors=(moved - origins) * ROLLING_SHUTTER_GAIN, colors=ROLLING_SHUTTER_COLOUR))
-        times = np.array([self._times.get(int(t), 0.0) for t in frames])
-        indexes = [rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
-                   rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)]
+        indexes = self._frame_indexes(len(frames))
         for column, (axis, colour) in enumerate((("dx", (0, 220, 255)), ("dy", (255, 110, 200)))):
             entity = f"{ent.ROLLING_SHUTTER_SKEW}/{axis}"
             self.rec.log(entity, rr.SeriesLines(names=f"bottom - top, {axis[1]} (px)", colors=[colour], widths=2.0),
@@ -709,28 +703,33 @@ class RerunRecorder:
     def _on_paths(self, paths: PathComparison) -> None:
         """Eq. 18's and the L1 path beside the run's own (the trajectory views), and in crop mode each frame's
         crop-window constraint: the output's corners on the input frame, and their room inside it (px)."""
-        frames = np.arange(len(paths.gaussian))
-        times = np.array([self._times.get(int(t), 0.0) for t in frames])
-        indexes = [rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
-                   rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)]
-        for root, values in ((ent.TRAJECTORY_GAUSSIAN, paths.gaussian), (ent.TRAJECTORY_L1, paths.l1)):
-            for column, axis in enumerate(ent.TRAJECTORY_AXES):
-                self.rec.send_columns(f"{root}/{axis}", indexes=indexes,
-                                      columns=rr.Scalars.columns(scalars=values[:, column]))
+        indexes = self._frame_indexes(len(paths.gaussian))
+        self._send_trajectories(indexes, (ent.TRAJECTORY_GAUSSIAN, paths.gaussian), (ent.TRAJECTORY_L1, paths.l1))
         if paths.crop_room_px is not None:
             self.rec.send_columns(ent.CROP_ROOM, indexes=indexes, columns=rr.Scalars.columns(scalars=paths.crop_room_px))
         if paths.crop_corners is not None:
             for t, corners in enumerate(paths.crop_corners):
-                self._set_time(Stamp(t, float(times[t])))
+                self._set_time(Stamp(t, self._times.get(t, 0.0)))
                 self.rec.log(ent.CROP_CONSTRAINT, rr.LineStrips2D([np.vstack([corners, corners[:1]])],
                                                                   colors=[CROP_COLOUR], radii=1.0))
 
+    def _frame_indexes(self, count: int) -> list[rr.TimeColumn]:
+        """The frame and video-time index columns of frames 0..count-1, for send_columns."""
+        frames = np.arange(count)
+        times = np.array([self._times.get(int(t), 0.0) for t in frames])
+        return [rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
+                rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)]
+
+    def _send_trajectories(self, indexes: list[rr.TimeColumn], *paths: tuple[str, np.ndarray]) -> None:
+        """Each (root, trajectory) as one series per axis (entities.TRAJECTORY_AXES: its columns)."""
+        for root, values in paths:
+            for column, axis in enumerate(ent.TRAJECTORY_AXES):
+                self.rec.send_columns(f"{root}/{axis}", indexes=indexes,
+                                      columns=rr.Scalars.columns(scalars=values[:, column]))
+
     def _on_crop_scales(self, scales: np.ndarray) -> None:
         """--mode crop: the window's scale per frame (constant for one window; --crop adaptive's follows the path)."""
-        frames = np.arange(len(scales))
-        times = np.array([self._times.get(int(t), 0.0) for t in frames])
-        self.rec.send_columns(ent.CROP_SCALE, indexes=[rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
-                                                       rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)],
+        self.rec.send_columns(ent.CROP_SCALE, indexes=self._frame_indexes(len(scales)),
                               columns=rr.Scalars.columns(scalars=scales))
 
     def _on_adaptive_window(self, stamp: Stamp, crop: AdaptiveCrop) -> None:
@@ -758,21 +757,15 @@ class RerunRecorder:
         self._on_output(stamp, result.output)
 
     def _on_smoothing(self, result: SmoothingResult) -> None:
-        frames = np.arange(len(result.orig_from_stab))
-        times = np.array([self._times.get(int(t), 0.0) for t in frames])
-        indexes = [rr.TimeColumn(ent.FRAME_TIMELINE, sequence=frames),
-                   rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=times)]
-        for root, values in ((ent.TRAJECTORY_ORIGINAL, result.original_trajectory),
-                             (ent.TRAJECTORY_SMOOTHED, result.smoothed_trajectory)):
-            for column, axis in enumerate(ent.TRAJECTORY_AXES):
-                self.rec.send_columns(f"{root}/{axis}", indexes=indexes,
-                                      columns=rr.Scalars.columns(scalars=values[:, column]))
+        n = len(result.orig_from_stab)
+        indexes = self._frame_indexes(n)
+        self._send_trajectories(indexes, (ent.TRAJECTORY_ORIGINAL, result.original_trajectory),
+                                (ent.TRAJECTORY_SMOOTHED, result.smoothed_trajectory))
         # Which path setting planned each frame (--path, --smoothness, --path-segment), by index into the list.
         if result.setting_of is not None:
             self.rec.send_columns(ent.PATH_SETTING, indexes=indexes,
                                   columns=rr.Scalars.columns(scalars=result.setting_of.astype(np.float64)))
         self.rec.log(ent.PATH_SETTINGS, rr.TextDocument("\n".join(result.settings)), static=True)
-        n = len(frames)
         if self._trace_requested is None:
             count = trace.DEFAULT_TRACED if self.level == "full" else 0
             self._set_traced(trace.default_trace_frames(result.orig_from_stab, *self._size, count=count))
@@ -780,7 +773,7 @@ class RerunRecorder:
             beyond = [t for t in self._trace_requested if t >= n]
             if beyond:
                 self._log_line(rr.TextLog(f"traced frame(s) {', '.join(map(str, beyond))} not in the clip's {n} "
-                                                 "frames: not traced", level=rr.TextLogLevel.WARN), static=True)
+                                          "frames: not traced", level=rr.TextLogLevel.WARN), static=True)
             self._set_traced([t for t in self._trace_requested if t < n])
 
     def _on_crop(self, crop: CropWindow) -> None:
@@ -1120,8 +1113,6 @@ _MODE_WORDS = {"full": "full frame: stabilize, then complete the missing area (c
 
 def _settings_summary(config: Any) -> list[str]:
     """The run's settings in a few words, then each setting that differs from the defaults (`section.name`)."""
-    import dataclasses
-
     if not dataclasses.is_dataclass(config):
         return [f"`{config}`"]
     rows = []
@@ -1148,8 +1139,6 @@ def _settings_summary(config: Any) -> list[str]:
 
 
 def _changed_settings(config: Any, defaults: Any, prefix: str = "") -> list[tuple[str, Any]]:
-    import dataclasses
-
     changed = []
     for field in dataclasses.fields(config):
         value, default = getattr(config, field.name), getattr(defaults, field.name, None)
@@ -1162,8 +1151,6 @@ def _changed_settings(config: Any, defaults: Any, prefix: str = "") -> list[tupl
 
 def _config_rows(config: Any) -> list[str]:
     """One line per setting: `section.name = value`, nested dataclasses flattened."""
-    import dataclasses
-
     if not dataclasses.is_dataclass(config):
         return [f"`{config}`"]
     rows: list[str] = []
