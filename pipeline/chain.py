@@ -21,14 +21,13 @@ from pipeline import geometry
 from pipeline.results import FrameResult, MotionPass, PathComparison, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.source import FrameSource, one_pass
-from pipeline.runtime.window import PerFrame, Windowed, sliding_window
+from pipeline.runtime.window import RENDER_SLACK_FRAMES, PerFrame, Windowed, sliding_window
 from pipeline.stages import adaptive_crop, completion, deblur, neighbours, rolling_shutter, smoothing, warping
 
 import numpy as np
 
 SINGLE_FRAME_WARNING = "only one frame: there is no motion to smooth, written as it is"
 NO_CROP_WARNING = "no area is common to all stabilized frames: crop disabled, borders left black"
-RENDER_SLACK_FRAMES = 8  # caches keep this many frames beyond the window: threads render a little out of order
 
 
 def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:

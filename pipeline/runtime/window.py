@@ -48,6 +48,11 @@ def sliding_window(items: Iterable[T], radius: int) -> Iterator[Windowed[T]]:
             first += 1
 
 
+# PerFrame caches keep this many frames beyond a frame's window before forgetting them: frames are rendered a
+# little out of order on several threads.
+RENDER_SLACK_FRAMES = 8
+
+
 class PerFrame(Generic[T, D]):
     """What ``make`` derives from a frame, by frame index, made once while the frame is in the window (every
     frame it is a neighbour of reuses it). Thread-safe: frames are rendered on several threads."""

@@ -38,7 +38,7 @@ from pipeline.stages import warping
 from pipeline.errors import ConfigError
 from pipeline.stages.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
 from pipeline.imaging import INTENSITY_WEIGHTS, intensity
-from pipeline.runtime.window import PerFrame
+from pipeline.runtime.window import RENDER_SLACK_FRAMES, PerFrame
 
 # Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
 # and scale with the frame height (blur, in pixels, grows with the resolution).
@@ -417,8 +417,7 @@ def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, fr
     """
     frames = {i: rgb for i, rgb in frames.items() if abs(i - t) <= config.neighbour_frames}
     if cache is not None:
-        # A few frames of slack: frames are rendered a little out of order on several threads.
-        cache.forget_before(t - config.neighbour_frames - 8)
+        cache.forget_before(t - config.neighbour_frames - RENDER_SLACK_FRAMES)
     measured = window_blurriness(frames, t, curr_from_prev, cache=cache)
     sharper = {o for o, ratio in measured.ratios.items() if ratio > config.min_ratio}
     neighbours = [n for n in warped if n.offset in sharper]
