@@ -104,7 +104,7 @@ def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
     assert rows["ffviz crop"]["black"] < 0.01
     same_as_opencv = rows["ffviz none mpeg4"]  # --codec mpeg4: the OpenCV sample's codec, the same frames
     assert same_as_opencv["codec"] == "mpeg4" and same_as_opencv["fps"] > 0
-    # the same stabilization (measured 2.8 px against none's 2.6; the input's 12.4): codec noise apart
+    # the same stabilization (measured 3.2 px against none's 3.1; the input's 10.8): codec noise apart
     assert same_as_opencv["jitter_px"] < 0.4 * source["jitter_px"]
     assert rows["ffviz none"]["black"] > rows["ffviz crop"]["black"] + 0.005  # uncovered borders stay black
     # the figure sees synthesized pixels where there are some (none's uncovered borders), and a crop has none,
@@ -126,7 +126,7 @@ def test_installed_peers_get_rows(bench_run):
     assert rows["vidstab"]["jitter_px"] < rows["input"]["jitter_px"]
     floor = rows["x264 only"]  # the encoder alone: the input's own shake and frame, ffviz's codec
     assert floor["note"] is None and floor["codec"] == "h264" and floor["fps"] > 0
-    assert floor["jitter_px"] > 0.7 * rows["input"]["jitter_px"]  # measured 0.83-1.01 (encoder noise, 30 frames)
+    assert floor["jitter_px"] > 0.7 * rows["input"]["jitter_px"]  # measured 1.11 (encoder noise, 30 frames)
     assert floor["crop"] > 0.99 and floor["black"] < 0.001
 
 

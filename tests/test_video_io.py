@@ -12,6 +12,7 @@ import av
 import numpy as np
 import pytest
 
+from pipeline.evaluation import synthetic
 from pipeline.errors import ConfigError, InputError, OutputError
 from pipeline.runtime.video_io import (
     Encoding,
@@ -20,6 +21,8 @@ from pipeline.runtime.video_io import (
     check_output_path,
     count_frames,
     probe_video,
+    x264_cpu_params,
+    x264_options,
 )
 from tests.conftest import real_clip
 
@@ -256,6 +259,32 @@ def test_h264_is_encoded_on_frame_threads_one_slice_a_frame(tmp_path):
     source = make_video(tmp_path / "in.mp4", width=640, height=360, frames=8)  # tiny frames get one slice anyway
     copy_through(source, tmp_path / "out.mp4", encoding=Encoding(codec="h264", crf=18))
     assert set(_slices_per_frame(tmp_path / "out.mp4")) == {1}
+
+
+def test_x264_is_kept_off_avx512_naming_only_the_cpus_own_instruction_sets(tmp_path):
+    cpuinfo = tmp_path / "cpuinfo"
+    cpuinfo.write_text("processor\t: 0\nflags\t\t: fpu sse sse2 pni ssse3 sse4_1 sse4_2 avx avx2 fma bmi1 bmi2 "
+                       "avx512f avx512bw\nclflush size\t: 64\n")
+    assert x264_cpu_params(cpuinfo) == ("asm=SSE,SSE2Fast,SSE3,SSSE3,SSE4.1,SSE4.2,AVX,FMA3,BMI1,BMI2,AVX2,Cache64",)
+    older = tmp_path / "older"  # no AVX-512: x264's own detection stands
+    older.write_text("flags\t\t: fpu sse sse2 avx avx2\n")
+    assert x264_cpu_params(older) == () and x264_cpu_params(tmp_path / "absent") == ()
+    assert x264_options("chromaloc=0") == {"x264-params": ":".join(("chromaloc=0", *x264_cpu_params()))}
+
+
+def test_the_same_frames_encode_to_the_same_bytes(tmp_path):
+    """Test clips, benchmarks and users' re-runs need it. PyAV's libx264 reads uninitialised memory in an
+    AVX-512 routine at this size: without x264_cpu_params, four encodes in one process often gave two or more
+    different files on an AVX-512 machine."""
+    video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30, seed=1))
+    sources = [tmp_path / f"in{i}.mp4" for i in range(4)]
+    for source in sources:
+        synthetic.write_video(video, source)
+    assert len({source.read_bytes() for source in sources}) == 1
+    outputs = [tmp_path / f"out{i}.mp4" for i in range(4)]
+    for output in outputs:
+        copy_through(sources[0], output, encoding=Encoding(codec="h264", crf=18))
+    assert len({output.read_bytes() for output in outputs}) == 1
 
 
 def test_variable_frame_rate_timing_is_kept(tmp_path):

@@ -762,6 +762,8 @@ def write_video(
     ``crf`` (0 = lossless in YUV), x264's ``preset`` (None: its default), the config fps."""
     import av
 
+    from pipeline.runtime.video_io import x264_options
+
     if isinstance(video, SyntheticVideo):
         frames: Iterable[np.ndarray] = video.sharp_frames if sharp else video.frames
         rate = video.config.fps if fps is None else fps
@@ -781,6 +783,7 @@ def write_video(
         stream.width, stream.height = w, h
         stream.pix_fmt = "yuv420p"
         options = {"qp": "0"} if crf <= 0 else {"crf": str(int(crf))}
+        options.update(x264_options())  # the same bytes every run
         stream.options = options if preset is None else {**options, "preset": preset}
         for f in itertools.chain([first], remaining):
             arr = np.ascontiguousarray(f, dtype=np.uint8)

@@ -10,6 +10,7 @@ raised as InputError or OutputError with a one-line message that names the file.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import heapq
 import itertools
 import math
@@ -661,6 +662,41 @@ _MAX_DEPTH = {"h264": 10, "hevc": 12, "mpeg4": 8}  # bits per sample each encode
 _MPEG4_MAX_TIME_BASE_DENOMINATOR = 65535  # the MPEG-4 Part 2 standard's limit (FFmpeg refuses more)
 
 
+# /proc/cpuinfo's flag -> x264's name for that instruction set (its `asm` option), in x264's order
+_X264_INSTRUCTION_SETS = (("sse", "SSE"), ("sse2", "SSE2Fast"), ("pni", "SSE3"), ("ssse3", "SSSE3"),
+                          ("sse4_1", "SSE4.1"), ("sse4_2", "SSE4.2"), ("abm", "LZCNT"), ("avx", "AVX"),
+                          ("fma", "FMA3"), ("bmi1", "BMI1"), ("bmi2", "BMI2"), ("avx2", "AVX2"))
+
+
+@functools.cache
+def x264_cpu_params(cpuinfo: Path = Path("/proc/cpuinfo")) -> tuple[str, ...]:
+    """x264-params entries that keep libx264 off its AVX-512 routines on a CPU that has them; none elsewhere.
+
+    Why: the libx264 that PyAV bundles reads uninitialised memory in an AVX-512 routine of its macroblock-tree
+    rate control at some frame sizes (320x180 is one), so the same frames encode to different bytes from one run,
+    or one encode, to the next: ``MALLOC_PERTURB_`` changes the output, while ``mbtree=0`` or an instruction set
+    without AVX-512 makes it repeatable. Where the bug does not strike, the list gives the same bytes as x264's
+    own detection. The sets named are those /proc/cpuinfo lists, so none the CPU lacks is forced on (x264 would
+    run it and die of an illegal instruction)."""
+    try:
+        text = cpuinfo.read_text(errors="replace")
+    except OSError:
+        return ()
+    flags = next((line.split(":", 1)[1].split() for line in text.splitlines() if line.startswith("flags")), [])
+    if "avx512f" not in flags:
+        return ()
+    names = [name for flag, name in _X264_INSTRUCTION_SETS if flag in flags]
+    if any(line.startswith("clflush size") and line.split(":", 1)[1].strip() == "64" for line in text.splitlines()):
+        names.append("Cache64")
+    return (f"asm={','.join(names)}",)
+
+
+def x264_options(*params: str) -> dict[str, str]:
+    """PyAV stream options carrying ``params`` and ``x264_cpu_params()`` as libx264's x264-params (empty: none)."""
+    joined = ":".join((*params, *x264_cpu_params()))
+    return {"x264-params": joined} if joined else {}
+
+
 @dataclass(frozen=True)
 class Encoding:
     """How the output video is compressed.
@@ -784,8 +820,8 @@ class VideoWriter:
         options = {**encoding.stream_options(colour.bit_depth), **colours.encoder_options(colour)}
         if codec == "hevc":
             options["x265-params"] = ":".join(["log-level=error", *colour.x265_hdr_params(), *colour.chroma_params()])
-        elif codec == "h264" and colour.chroma_params():
-            options["x264-params"] = ":".join(colour.chroma_params())
+        elif codec == "h264":
+            options.update(x264_options(*colour.chroma_params()))
         if depth < colour.bit_depth:
             self.warnings.append(f"{codec} cannot store {colour.bit_depth}-bit video: written at {depth} bits, with "
                                  f"the input's colour tags ({colour.summary()}); --codec hevc keeps up to 12")
