@@ -689,7 +689,7 @@ class RerunRecorder:
     def _on_path(self, plan: PathPlan) -> None:
         self._on_smoothing(plan.smoothing)
         if plan.paths is not None:
-            self._on_paths(plan.paths)
+            self._on_paths(plan.paths())
         if plan.rolling_shutter is not None:
             self._on_rolling_shutter(plan.rolling_shutter)
         if plan.crop is not None:

@@ -11,6 +11,7 @@ out identical; neighbours are taken from the frame's own shot only (nothing cros
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import threading
 import time
@@ -32,10 +33,11 @@ NO_CROP_WARNING = "no area is common to all stabilized frames: crop disabled, bo
 
 def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
     """Smooth the whole path (it is tiny: one 3x3 matrix a frame) and choose each output frame's transform, with
-    the other planner's path beside it for display (``PathPlan.paths``).
+    the other planner's path beside it for display made on request (``PathPlan.paths()``: a second solve, which
+    only recordings and figures want).
     With rolling-shutter correction, the path is that of the corrected views (each frame's middle row's)."""
     plan = _plan(motion_pass, config, width, height)
-    return dataclasses.replace(plan, paths=_compare_paths(plan, config, width, height))
+    return dataclasses.replace(plan, paths=functools.partial(_compare_paths, plan, config, width, height))
 
 
 def _compare_paths(plan: PathPlan, config: StabilizeConfig, width: int, height: int) -> PathComparison:

@@ -10,6 +10,7 @@ no intermediates (segment-parallel runs send only the output across processes).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -79,7 +80,8 @@ class PathPlan:
     warnings: list[str]  # about the path as a whole (limits reached, crop given up, a single frame)
     adaptive_crop: AdaptiveCrop | None = None  # crop mode with --crop adaptive: a window per frame
     rolling_shutter: Correction | None = None  # --rolling-shutter: each frame's rows against its middle row
-    paths: PathComparison | None = None  # eq. 18 and the L1 path side by side, for the recording and figures
+    # eq. 18 and the L1 path side by side, for the recording and figures: made on request (it solves the other path)
+    paths: Callable[[], PathComparison] | None = None
 
 
 @dataclass
