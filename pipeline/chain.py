@@ -29,6 +29,9 @@ import numpy as np
 
 SINGLE_FRAME_WARNING = "only one frame: there is no motion to smooth, written as it is"
 NO_CROP_WARNING = "no area is common to all stabilized frames: crop disabled, borders left black"
+# Crop mode's L1 window without --crop-scale is first tried at the one eq. 18's path at this radius keeps: the room
+# the shake within about half a second needs (about what vid.stab's defaults keep: docs/benchmarks-crop-l1.md).
+SHAKE_RADIUS_FRAMES = 15
 
 
 def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
@@ -94,22 +97,7 @@ def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, he
     smoothed = smoothing.smooth(motion_pass.curr_from_prev, config.smoothing, cuts=motion_pass.cuts,
                                 width=width, height=height, times_s=motion_pass.times_s)
     if config.mode == "crop" and config.smoothing.uses_l1:
-        # The L1 program with Grundmann et al.'s crop-window constraint: the centred window of the scale given, or
-        # the window the path without it keeps (its largest common window), stays inside every input frame, and
-        # within it the path is as smooth as the program can make it.
-        window = None
-        if config.crop.scale is not None:
-            window = (config.crop.scale, (0.0, 0.0))
-        else:
-            today = warping.largest_crop(smoothed.orig_from_stab, width, height)
-            if today is not None:
-                cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
-                window = (today.scale, (today.x0 + today.scale * cx - cx, today.y0 + today.scale * cy - cy))
-        if window is not None:
-            l1 = dataclasses.replace(config.smoothing.l1, crop_scale=window[0], crop_offset=window[1])
-            smoothed = smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(config.smoothing, l1=l1),
-                                        cuts=motion_pass.cuts, width=width, height=height,
-                                        times_s=motion_pass.times_s)
+        smoothed = _l1_in_crop_window(motion_pass, config, width, height, smoothed)
     warnings = [SINGLE_FRAME_WARNING] if motion_pass.n_frames == 1 else []
     warnings += smoothing.path_warnings(smoothed, config.smoothing)
     orig_from_out, crop = smoothed.orig_from_stab, None
@@ -129,6 +117,53 @@ def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, he
         else:
             orig_from_out = smoothed.orig_from_stab @ crop.stab_from_out
     return PathPlan(motion_pass, smoothed, orig_from_out, crop, warnings)
+
+
+def _l1_in_crop_window(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int,
+                       free: smoothing.SmoothingResult) -> smoothing.SmoothingResult:
+    """The L1 program with Grundmann et al.'s crop-window constraint: a window stays inside every input frame and
+    within it the path is as smooth as the program can make it. The window: the centred one of --crop-scale, or
+    the largest that leaves the path at least as steady as eq. 18's at the run's radius: tried from the window
+    eq. 18's path at SHAKE_RADIUS_FRAMES keeps (the room the shake within about half a second needs) to the one
+    at the run's radius, whose room always does. ``free``: the L1 path without the window (returned if no window
+    fits)."""
+    def solve(window: tuple[float, tuple[float, float]]) -> smoothing.SmoothingResult:
+        l1 = dataclasses.replace(config.smoothing.l1, crop_scale=window[0], crop_offset=window[1])
+        return smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(config.smoothing, l1=l1),
+                                cuts=motion_pass.cuts, width=width, height=height, times_s=motion_pass.times_s)
+
+    if config.crop.scale is not None:
+        return solve((config.crop.scale, (0.0, 0.0)))
+    windows, reference = [], None
+    run_radius = config.smoothing.radius_frames
+    for radius in dict.fromkeys((SHAKE_RADIUS_FRAMES, (SHAKE_RADIUS_FRAMES + run_radius) // 2, run_radius)):
+        eq18 = smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(
+            config.smoothing, path="gaussian", radius_frames=radius, sigma=None, smoothness=None, segments=()),
+            cuts=motion_pass.cuts, width=width, height=height)
+        needed = warping.largest_crop(eq18.orig_from_stab, width, height)
+        if needed is not None:
+            cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+            windows.append((needed.scale, (needed.x0 + needed.scale * cx - cx, needed.y0 + needed.scale * cy - cy)))
+        reference = eq18
+    if not windows:
+        return free
+    steadiness = _shake_px(reference.smoothed_trajectory, motion_pass.times_s)
+    for window in sorted(windows, reverse=True)[:-1]:
+        planned = solve(window)
+        if _shake_px(planned.smoothed_trajectory, motion_pass.times_s) <= steadiness:
+            return planned
+    return solve(min(windows))
+
+
+def _shake_px(trajectory: np.ndarray, times_s: list[float]) -> float:
+    """RMS of a trajectory's x and y (px) above a Gaussian low-pass of half a second: the shake left in a path
+    (the high-pass pipeline.evaluation.metrics' residual jitter takes of a video's motion)."""
+    from scipy.ndimage import gaussian_filter1d
+
+    fps = (len(times_s) - 1) / (times_s[-1] - times_s[0]) if len(times_s) > 1 and times_s[-1] > times_s[0] else 30.0
+    xy = np.asarray(trajectory, np.float64)[:, :2]
+    return float(np.sqrt(np.mean(np.sum((xy - gaussian_filter1d(xy, fps / 2.0, axis=0, mode="nearest")) ** 2,
+                                        axis=1)))) if len(xy) > 1 else 0.0
 
 
 class FrameChain:

@@ -152,7 +152,9 @@ def _bounds(n: int, config: L1PathConfig, frame: _Frame) -> tuple[np.ndarray, np
         ox, oy = (abs(v) for v in config.crop_offset)
         sx = config.crop_room_share * (room * (frame.width - 1) + ox) / l
         sy = config.crop_room_share * (room * (frame.height - 1) + oy) / l
-        lower, upper = [-zoom, -turn, -sx, -sy], [zoom, turn, sx, sy]
+        # never zoomed in beyond the window: a constant zoom-in costs the objective nothing and would buy room for
+        # the path by cropping more than the window (zoomed out, the corners' constraints bound it)
+        lower, upper = [0.0, -turn, -sx, -sy], [zoom, turn, sx, sy]
     return np.tile(lower, (n, 1)), np.tile(upper, (n, 1))
 
 
