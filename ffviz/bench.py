@@ -40,6 +40,8 @@ VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv", ".avi", ".m4v", ".webm")
 MODES = ("full", "crop", "none")
 # A mode with "-mpeg4" writes the OpenCV sample's codec (--codec mpeg4): its chain compared without x264's cost.
 MPEG4_MODES = tuple(f"{mode}-mpeg4" for mode in MODES)
+# A mode with "-l1" plans the L1-optimal path (--path l1) instead of the mode's default.
+L1_MODES = ("full-l1", "crop-l1")
 DEFAULT_MODES = (*MODES, "full-mpeg4")
 PEERS = ("vidstab", "deshake", "opencv", "x264")
 DEFAULT_OUT = Path("bench_out")  # git-ignored
@@ -183,11 +185,18 @@ class Method:
         return work / f"{clip.name}.{self.name.replace(' ', '-')}{self.output_suffix}"  # a.mp4, a.avi: apart
 
 
+def mode_options(mode: str) -> tuple[str, list[str]]:
+    """(--mode, the other `ffviz stabilize` options) of a bench mode: one of MODES, MPEG4_MODES or L1_MODES."""
+    base, _, variant = mode.partition("-")
+    options = {"": [], "mpeg4": ["--codec", "mpeg4"], "l1": ["--path", "l1"]}[variant]
+    return base, options
+
+
 def ffviz_command(clip: Path, output: Path, mode: str) -> list[str]:
-    """``mode``: one of MODES, or of MPEG4_MODES."""
-    mode, _, codec = mode.partition("-")
-    return [sys.executable, "-m", "ffviz.cli", "stabilize", str(clip), "-o", str(output), "--mode", mode,
-            "--overwrite", *(["--codec", codec] if codec else [])]
+    """``mode``: one of MODES, MPEG4_MODES or L1_MODES."""
+    base, options = mode_options(mode)
+    return [sys.executable, "-m", "ffviz.cli", "stabilize", str(clip), "-o", str(output), "--mode", base,
+            "--overwrite", *options]
 
 
 def ffviz_method(mode: str) -> Method:
@@ -335,7 +344,7 @@ def add_parser(commands: Any) -> None:
                         "else the synthetic demo clip)")
     p.add_argument("--modes", default=",".join(DEFAULT_MODES),
                    help="ffviz modes, comma-separated, or '' for peers only; MODE-mpeg4 writes MPEG-4 Part 2 "
-                        "as the OpenCV sample does (default: %(default)s)")
+                        "as the OpenCV sample does; full-l1 and crop-l1 plan the L1 path (default: %(default)s)")
     p.add_argument("--peers", default=",".join(PEERS),
                    help="peer methods, comma-separated, or none (default: %(default)s)")
     p.add_argument("--repeat", type=int, default=1, metavar="N", help="runs per clip and method; the table "
@@ -357,6 +366,8 @@ def _profile(clips: Sequence[Path], modes: Sequence[str]) -> int:
     """--profile: the per-stage CPU table (ffviz/bench_profile.py) on stdout."""
     from ffviz import bench_profile
 
+    if set(modes) & set(L1_MODES):
+        raise ConfigError("--profile measures each mode's default path: leave out " + ", ".join(L1_MODES))
     rows = []
     for clip in clips:
         for mode in modes:
@@ -415,7 +426,7 @@ def _synthetic_clip(folder: Path) -> Path:
 def cmd_bench(args: argparse.Namespace) -> int:
     from ffviz import bench_report as report
 
-    modes = _choices(args.modes, MODES + MPEG4_MODES, "--modes")
+    modes = _choices(args.modes, MODES + MPEG4_MODES + L1_MODES, "--modes")
     if args.profile:
         return _profile(_clips(args.videos, args.output_dir), modes)
     peers = [] if args.peers.strip() == "none" else _choices(args.peers, PEERS, "--peers")  # "none" is also a mode

@@ -270,3 +270,15 @@ def test_profile_attributes_the_cpu_to_every_stage_of_full_mode(tiny_clip, capsy
         assert by_stage[stage] > 0, stage
     # the stages of the run without recording add up to its measured CPU, with what no stage claims as 'other'
     assert sum(by_stage[s] for s in STAGES if s != "recording") == pytest.approx(total, rel=0.02, abs=0.3)
+
+
+def test_l1_modes_run_the_l1_path_and_the_profile_refuses_them(tmp_path):
+    command = bench.ffviz_command(tmp_path / "a.mp4", tmp_path / "o.mp4", "crop-l1")
+    assert command[command.index("--mode") + 1] == "crop" and command[command.index("--path") + 1] == "l1"
+    assert "--codec" not in command
+    mpeg4 = bench.ffviz_command(tmp_path / "a.mp4", tmp_path / "o.mp4", "full-mpeg4")
+    assert mpeg4[mpeg4.index("--codec") + 1] == "mpeg4" and "--path" not in mpeg4
+    from pipeline.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="crop-l1"):
+        bench._profile([], ["crop", "crop-l1"])
