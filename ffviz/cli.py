@@ -201,11 +201,13 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "larger is steadier but needs more completion or crop (default: %(default)s)")
     p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
                    help="width of that Gaussian, in frames (default: sqrt(K))")
-    p.add_argument("--path", choices=smoothing.PATHS, default="gaussian",
+    p.add_argument("--path", choices=smoothing.PATHS, default=None,
                    help="camera path planner: gaussian (eq. 18, with -k); l1 (L1-optimal path of still, "
                         "constant-velocity and constant-acceleration pieces, each frame within 3%% of the frame's "
-                        "longer side, 2 degrees and 4%% zoom of its input; -k unused); tripod (see --tripod) "
-                        "(default: %(default)s)")
+                        "longer side, 2 degrees and 4%% zoom of its input, or in crop mode inside the crop window); "
+                        "tripod (see --tripod); auto (crop mode: l1 in the widest window where it is as steady as "
+                        "gaussian, else gaussian; other modes: gaussian) (default: auto in crop mode, gaussian "
+                        "otherwise)")
     p.add_argument("--tripod", action="store_true",
                    help="hold the camera still (same as --path tripod): the output does not move while a still "
                         "view stays within 10%% of the frame, 4 degrees and 8%% zoom of every input frame; where the "

@@ -33,7 +33,7 @@ def _check_options(args: argparse.Namespace) -> None:
     encoder's values are video_io.Encoding's to check)."""
     if getattr(args, "workers", None) is not None and args.workers < 1:
         raise ConfigError(f"--workers must be at least 1, not {args.workers}")
-    if getattr(args, "tripod", False) and getattr(args, "path", "gaussian") not in ("gaussian", "tripod"):
+    if getattr(args, "tripod", False) and getattr(args, "path", None) not in (None, "gaussian", "tripod"):
         raise ConfigError(f"--tripod holds the camera still; it cannot be combined with --path {args.path}")
     if args.smoothing_radius > MAX_RADIUS:
         raise ConfigError(f"-k must be at most {MAX_RADIUS}, not {args.smoothing_radius}")
@@ -75,7 +75,8 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
                                        ignore_mask=getattr(args, "ignore_mask", None)),
             smoothing=smoothing.SmoothingConfig(
                 radius_frames=args.smoothing_radius, sigma=args.smoothing_sigma,
-                path="tripod" if getattr(args, "tripod", False) else getattr(args, "path", "gaussian"),
+                path="tripod" if getattr(args, "tripod", False) else (getattr(args, "path", None)
+                                                                       or stab.DEFAULT_PATHS[args.mode]),
                 horizon_lock=getattr(args, "horizon_lock", False),
                 smoothness=(path_control.Smoothness.parse(args.smoothness)
                             if getattr(args, "smoothness", None) is not None else None),

@@ -123,18 +123,21 @@ def _l1_in_crop_window(motion_pass: MotionPass, config: StabilizeConfig, width: 
                        free: smoothing.SmoothingResult) -> smoothing.SmoothingResult:
     """The L1 program with Grundmann et al.'s crop-window constraint: a window stays inside every input frame and
     within it the path is as smooth as the program can make it. The window: the centred one of --crop-scale, or
-    the largest that leaves the path at least as steady as eq. 18's at the run's radius: tried from the window
-    eq. 18's path at SHAKE_RADIUS_FRAMES keeps (the room the shake within about half a second needs) to the one
-    at the run's radius, whose room always does. ``free``: the L1 path without the window (returned if no window
-    fits)."""
-    def solve(window: tuple[float, tuple[float, float]]) -> smoothing.SmoothingResult:
-        l1 = dataclasses.replace(config.smoothing.l1, crop_scale=window[0], crop_offset=window[1])
-        return smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(config.smoothing, l1=l1),
+    the widest that leaves the path at least as steady as eq. 18's at the run's radius (by ``_shake_px``), tried
+    from the window eq. 18's path at SHAKE_RADIUS_FRAMES keeps (the room the shake within about half a second
+    needs) to eq. 18's own. Where none does, the l1 path takes eq. 18's window and the auto path is eq. 18's.
+    ``free``: the run's path without the window (eq. 18's for auto; returned if no window fits)."""
+    auto = config.smoothing.path == "auto"
+    l1_config = dataclasses.replace(config.smoothing, path="l1") if auto else config.smoothing
+
+    def solve(window: tuple[float, tuple[float, float]], zoom_in: float = 0.0) -> smoothing.SmoothingResult:
+        l1 = dataclasses.replace(l1_config.l1, crop_scale=window[0], crop_offset=window[1], crop_zoom_in=zoom_in)
+        return smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(l1_config, l1=l1),
                                 cuts=motion_pass.cuts, width=width, height=height, times_s=motion_pass.times_s)
 
     if config.crop.scale is not None:
         return solve((config.crop.scale, (0.0, 0.0)))
-    windows, reference = [], None
+    windows, reference = [], None  # (scale, offset, how far eq. 18's path zooms in)
     run_radius = config.smoothing.radius_frames
     for radius in dict.fromkeys((SHAKE_RADIUS_FRAMES, (SHAKE_RADIUS_FRAMES + run_radius) // 2, run_radius)):
         eq18 = smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(
@@ -143,16 +146,21 @@ def _l1_in_crop_window(motion_pass: MotionPass, config: StabilizeConfig, width: 
         needed = warping.largest_crop(eq18.orig_from_stab, width, height)
         if needed is not None:
             cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
-            windows.append((needed.scale, (needed.x0 + needed.scale * cx - cx, needed.y0 + needed.scale * cy - cy)))
+            zoom_in = -float(np.log(np.sqrt(np.abs(np.linalg.det(eq18.orig_from_stab[:, :2, :2])))).min())
+            windows.append((needed.scale, (needed.x0 + needed.scale * cx - cx, needed.y0 + needed.scale * cy - cy),
+                            max(zoom_in, 0.0)))
         reference = eq18
     if not windows:
         return free
     steadiness = _shake_px(reference.smoothed_trajectory, motion_pass.times_s)
-    for window in sorted(windows, reverse=True)[:-1]:
-        planned = solve(window)
+    for scale, offset, zoom_in in sorted(windows, reverse=True)[:None if auto else -1]:
+        planned = solve((scale, offset), zoom_in)
         if _shake_px(planned.smoothed_trajectory, motion_pass.times_s) <= steadiness:
             return planned
-    return solve(min(windows))
+    if auto:
+        return free
+    scale, offset, zoom_in = min(windows)
+    return solve((scale, offset), zoom_in)
 
 
 def _shake_px(trajectory: np.ndarray, times_s: list[float]) -> float:

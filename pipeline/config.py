@@ -12,13 +12,19 @@ from pipeline.stages import completion, deblur, motion, rolling_shutter, smoothi
 
 OutputMode = Literal["full", "none", "crop"]
 OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
+# Each mode's camera path when none is given. Crop: auto, the L1 program inside the widest crop window where it is
+# as steady as eq. 18's path, else eq. 18's (on every shared clip the L1 path, steadier and keeping more of the
+# frame); full and none: eq. 18, since the L1 path's wider departures leave completion more to fill
+# (docs/decisions.md, 2026-11-25).
+DEFAULT_PATHS = {"full": "gaussian", "none": "gaussian", "crop": "auto"}
 
 
 @dataclass(frozen=True)
 class StabilizeConfig:
     mode: OutputMode = "full"
     motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
-    smoothing: smoothing.SmoothingConfig = field(default_factory=smoothing.SmoothingConfig)
+    # None: the mode's DEFAULT_PATHS path with its defaults (set here, so the config always holds one)
+    smoothing: smoothing.SmoothingConfig = None  # type: ignore[assignment]
     completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
     deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
     crop: CropConfig = field(default_factory=CropConfig)  # --mode crop's window: fixed or adaptive
@@ -28,6 +34,8 @@ class StabilizeConfig:
         object.__setattr__(self, "rolling_shutter", rolling_shutter.parse_readout(self.rolling_shutter))
         if self.mode not in OUTPUT_MODES:
             raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
+        if self.smoothing is None:
+            object.__setattr__(self, "smoothing", smoothing.SmoothingConfig(path=DEFAULT_PATHS[self.mode]))
         if self.crop.scale is not None and not (self.mode == "crop" and self.smoothing.uses_l1):
             raise ConfigError("--crop-scale needs --mode crop and the l1 or tripod path (it is the L1 program's "
                               "crop-window constraint)")

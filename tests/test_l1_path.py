@@ -179,29 +179,37 @@ def test_crop_mode_l1_keeps_the_window_inside_every_input_frame(seed):
     assert all(_invalid_pixels(m) == 0 for m in plan.orig_from_out)
 
 
-@pytest.mark.parametrize("seed", [1, 5])
-def test_crop_mode_l1_tries_the_room_the_short_shake_needs_and_never_zooms_in(seed):
-    """Without --crop-scale the window tried first is the one eq. 18's path at SHAKE_RADIUS_FRAMES keeps, then
-    narrower ones down to eq. 18's own; the first whose path is as steady as eq. 18's is kept. And no frame zooms
-    in past the window: a constant zoom-in costs the program nothing and would buy the path room by cropping more
-    than the window (vplab_C's output kept 0.866 of its size, not the window's 0.893, before the bound)."""
+@pytest.mark.parametrize("seed", [1, 5, 7])
+def test_crop_mode_default_path_is_never_shakier_than_eq18_and_keeps_as_much(seed):
+    """Crop mode's default (auto): the L1 path in the widest window, from the one eq. 18's path at
+    SHAKE_RADIUS_FRAMES keeps down to eq. 18's own, where it is as steady as eq. 18's path (by chain._shake_px),
+    else eq. 18's path. So it is never shakier than eq. 18's by that measure, keeps at least as much of the frame
+    as eq. 18's crop, and shows no invalid pixel. The L1 program zooms in past its window no further than eq. 18's
+    path does: a constant zoom-in costs it nothing and would buy room by cropping more than the window (vplab_C's
+    output kept 0.866 of its size for a 0.893 window before the bound)."""
     video = generate(SyntheticConfig(n_frames=90, moving_object=False, blurred_frames=(), jitter_deg=1.5,
                                      seed=seed))
     motion_pass = _motion_pass(video)
-    plan = plan_path(motion_pass, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig(path="l1")), W, H)
-    short = smoothing.smooth(video.curr_from_prev, smoothing.SmoothingConfig(radius_frames=chain.SHAKE_RADIUS_FRAMES),
-                             width=W, height=H)
-    widest = warping.largest_crop(short.orig_from_stab, W, H).scale
-    assert plan.crop.scale <= widest + 1e-3
-    first = plan_path(motion_pass, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig(path="l1"),
-                                                   crop=adaptive_crop.CropConfig(scale=widest)), W, H)
-    eq18 = smoothing.smooth(video.curr_from_prev, smoothing.SmoothingConfig(), width=W, height=H)
-    steady = chain._shake_px(first.smoothing.smoothed_trajectory, motion_pass.times_s) <= chain._shake_px(
-        eq18.smoothed_trajectory, motion_pass.times_s)
-    assert (plan.crop.scale >= widest - 1e-3) == steady  # kept where steady enough, narrowed where not
-    output_scale = np.sqrt(np.abs(np.linalg.det(plan.orig_from_out[:, :2, :2])))
-    assert output_scale.min() >= plan.crop.scale - 1e-6
-    assert all(_invalid_pixels(m) == 0 for m in plan.orig_from_out)
+    times = motion_pass.times_s
+    auto = plan_path(motion_pass, StabilizeConfig(mode="crop"), W, H)
+    eq18 = plan_path(motion_pass, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig()), W, H)
+    assert chain._shake_px(auto.smoothing.smoothed_trajectory, times) <= chain._shake_px(
+        eq18.smoothing.smoothed_trajectory, times) + 1e-9
+
+    def kept(plan) -> float:
+        return float(np.sqrt(np.abs(np.linalg.det(plan.orig_from_out[:, :2, :2]))).mean())
+
+    assert kept(auto) >= kept(eq18) - 1e-3
+    assert all(_invalid_pixels(m) == 0 for m in auto.orig_from_out)
+    # With the L1 path asked for: eq. 18's window at the least, zoomed in no further than the eq. 18 paths whose
+    # windows it tries (radii 15, 22 and the run's 30).
+    l1 = plan_path(motion_pass, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig(path="l1")), W, H)
+    zoom_in = max(-np.log(np.sqrt(np.abs(np.linalg.det(smoothing.smooth(video.curr_from_prev, smoothing.SmoothingConfig(
+        radius_frames=radius), width=W, height=H).orig_from_stab[:, :2, :2])))).min() for radius in (15, 22, 30))
+    l1_zoom = np.log(np.sqrt(np.abs(np.linalg.det(l1.smoothing.orig_from_stab[:, :2, :2]))))
+    assert l1_zoom.min() >= -max(zoom_in, 0.0) - 1e-6
+    assert kept(l1) >= kept(eq18) - 0.01
+    assert all(_invalid_pixels(m) == 0 for m in l1.orig_from_out)
 
 
 def test_crop_mode_tripod_and_adaptive_crop_show_no_invalid_pixel():
@@ -249,8 +257,9 @@ def test_horizon_lock_holds_the_output_rotation_at_zero(path):
 
 
 def test_cli_path_options_end_to_end(tmp_path, capsys):
-    """--path l1, --tripod, --horizon-lock and --crop-scale run through the command line; --tripod with --path l1
-    and --crop-scale on eq. 18's path are refused in one line."""
+    """--path l1, --tripod, --horizon-lock and --crop-scale run through the command line (crop mode plans the L1
+    path unless told otherwise); --tripod with --path l1 and --crop-scale on eq. 18's path are refused in one
+    line."""
     from ffviz import cli
     from pipeline.evaluation import synthetic
     from pipeline.runtime import video_io
@@ -260,12 +269,14 @@ def test_cli_path_options_end_to_end(tmp_path, capsys):
     source = tmp_path / "shaky.mp4"
     synthetic.write_video(video, source)
     for index, options in enumerate((["--mode", "none", "--path", "l1"], ["--mode", "none", "--tripod", "--horizon-lock"],
-                                     ["--mode", "crop", "--path", "l1", "--crop-scale", "0.9"])):
+                                     ["--mode", "crop", "--path", "l1", "--crop-scale", "0.9"],
+                                     ["--mode", "crop", "--crop-scale", "0.9"])):  # crop mode's default path is l1
         out = tmp_path / f"out{index}.mp4"
         assert cli.main(["stabilize", str(source), "-o", str(out), "--no-deblur", *options]) == 0
         assert video_io.probe_video(out).frame_count == 30
-    for options, word in ((["--tripod", "--path", "l1"], "--tripod"), (["--mode", "crop", "--crop-scale", "0.9"],
-                                                                       "--crop-scale")):
+    for options, word in ((["--tripod", "--path", "l1"], "--tripod"),
+                          (["--mode", "crop", "--path", "gaussian", "--crop-scale", "0.9"], "--crop-scale"),
+                          (["--crop-scale", "0.9"], "--crop-scale")):
         capsys.readouterr()
         assert cli.main(["stabilize", str(source), "-o", str(tmp_path / "x.mp4"), *options]) == 2
         err = capsys.readouterr().err.strip().splitlines()
@@ -307,3 +318,14 @@ def test_the_recording_and_figure_show_both_paths_and_the_crop_constraint(tmp_pa
     fig = figures.trajectories(recording)
     labels = {line.get_label() for line in fig.axes[0].lines}
     assert {"original", "eq. 18 (gaussian)", "L1"} <= labels
+
+
+def test_each_mode_plans_its_default_path_unless_given_one():
+    """Crop mode plans auto (the L1 path inside its window where steadier), full and none modes eq. 18's; a path
+    given is kept."""
+    from pipeline.config import DEFAULT_PATHS
+
+    assert {mode: StabilizeConfig(mode=mode).smoothing.path for mode in ("full", "none", "crop")} == DEFAULT_PATHS
+    assert DEFAULT_PATHS == {"full": "gaussian", "none": "gaussian", "crop": "auto"}
+    given = smoothing.SmoothingConfig(path="gaussian", radius_frames=12)
+    assert StabilizeConfig(mode="crop", smoothing=given).smoothing == given

@@ -58,6 +58,10 @@ class L1PathConfig:
     crop_scale: float | None = None
     crop_room_share: float = 1.0
     crop_offset: tuple[float, float] = (0.0, 0.0)  # the window's centre from the frame's centre (px, x and y)
+    # Crop mode: how far (log scale) a frame may zoom in past the window. A constant zoom-in costs the program nothing
+    # and buys the path room by cropping more than the window, so it is bounded: 0 (never), or as far as the path the
+    # window was taken from zooms in (so that path stays feasible).
+    crop_zoom_in: float = 0.0
 
     @classmethod
     def tripod(cls) -> L1PathConfig:
@@ -74,6 +78,8 @@ class L1PathConfig:
                              f"4 <= overlap < window / 2")
         if self.crop_scale is not None and not 0.05 <= self.crop_scale <= 1.0:
             raise ConfigError(f"crop scale must be in [0.05, 1], not {self.crop_scale}")
+        if not self.crop_zoom_in >= 0.0:
+            raise ConfigError(f"crop zoom-in must be >= 0, not {self.crop_zoom_in}")
         if not 0.0 <= self.crop_room_share <= 1.0:
             raise ConfigError(f"crop room share must be in [0, 1], not {self.crop_room_share}")
 
@@ -152,9 +158,8 @@ def _bounds(n: int, config: L1PathConfig, frame: _Frame) -> tuple[np.ndarray, np
         ox, oy = (abs(v) for v in config.crop_offset)
         sx = config.crop_room_share * (room * (frame.width - 1) + ox) / l
         sy = config.crop_room_share * (room * (frame.height - 1) + oy) / l
-        # never zoomed in beyond the window: a constant zoom-in costs the objective nothing and would buy room for
-        # the path by cropping more than the window (zoomed out, the corners' constraints bound it)
-        lower, upper = [0.0, -turn, -sx, -sy], [zoom, turn, sx, sy]
+        # zoomed in past the window at most crop_zoom_in (zoomed out, the corners' constraints bound it)
+        lower, upper = [-min(config.crop_zoom_in, zoom), -turn, -sx, -sy], [zoom, turn, sx, sy]
     return np.tile(lower, (n, 1)), np.tile(upper, (n, 1))
 
 

@@ -26,7 +26,7 @@ from pipeline.errors import ConfigError
 DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
 
 
-PATHS = ("gaussian", "l1", "tripod")
+PATHS = ("gaussian", "l1", "tripod", "auto")
 TRIPOD_STILL = 0.05  # px or degrees a frame: a tripod path moving more than this is following the camera
 
 
@@ -34,7 +34,10 @@ TRIPOD_STILL = 0.05  # px or degrees a frame: a tripod path moving more than thi
 class SmoothingConfig:
     radius_frames: int = DEFAULT_RADIUS  # k (eq. 18): frames on each side of t in N_t
     sigma: float | None = None  # Gaussian sigma in frames; None -> sqrt(k) as in the thesis
-    path: str = "gaussian"  # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/stages/l1_path.py); "tripod": held
+    # "gaussian": eq. 18; "l1": the L1-optimal path (pipeline/stages/l1_path.py); "tripod": held; "auto": in crop mode
+    # the L1 path in the widest crop window where it is as steady as eq. 18's, else eq. 18's (pipeline/chain.py),
+    # in other modes eq. 18's
+    path: str = "gaussian"
     l1: l1_path.L1PathConfig = l1_path.L1PathConfig()  # its bounds, when path is "l1"
     horizon_lock: bool = False  # the output keeps the rotation of each shot's first frame (any path)
     # Per-axis strength 0-100 (path_control.Smoothness); None: radius/sigma (eq. 18) or l1's margins as given.
@@ -98,7 +101,8 @@ class SmoothingConfig:
 
     @property
     def uses_l1(self) -> bool:
-        """Whether any frame is planned by the L1 program (the l1 or tripod path, here or in a segment)."""
+        """Whether any frame may be planned by the L1 program (the l1, tripod or, in crop mode, auto path, here or
+        in a segment)."""
         return self.path != "gaussian" or any(segment.path != "gaussian" for segment in self.segments)
 
     def label(self) -> str:
@@ -186,7 +190,7 @@ def _plan_shot(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: in
 def _plan_range(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: int, last: int,
                 config: SmoothingConfig, width: int, height: int) -> np.ndarray:
     """S_t for frames ``first``..``last`` planned as one shot with one setting."""
-    if config.path != "gaussian":
+    if config.path in ("l1", "tripod"):  # "auto" is eq. 18's here; crop mode's planner chooses (pipeline/chain.py)
         planner = config.l1_planner(max(width, 1), max(height, 1))
         return _l1_path(curr_from_prev, first, last, planner, width, height)
     if config.smoothness is None or config.smoothness.uniform:
