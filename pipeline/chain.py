@@ -157,8 +157,9 @@ def _l1_in_crop_window(motion_pass: MotionPass, config: StabilizeConfig, width: 
         planned = solve((scale, offset), zoom_in)
         if _shake_px(planned.smoothed_trajectory, motion_pass.times_s) <= steadiness:
             return planned
-    if auto:
-        return free
+    if auto:  # eq. 18's path, labelled as such in the recording
+        return dataclasses.replace(free, settings=(dataclasses.replace(config.smoothing, path="gaussian").label(),
+                                                   *free.settings[1:]))
     scale, offset, zoom_in = min(windows)
     return solve((scale, offset), zoom_in)
 

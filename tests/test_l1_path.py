@@ -200,6 +200,7 @@ def test_crop_mode_default_path_is_never_shakier_than_eq18_and_keeps_as_much(see
         return float(np.sqrt(np.abs(np.linalg.det(plan.orig_from_out[:, :2, :2]))).mean())
 
     assert kept(auto) >= kept(eq18) - 1e-3
+    assert auto.smoothing.settings[0] in ("l1", "gaussian:k=30")  # the path it planned, as the recording names it
     assert all(_invalid_pixels(m) == 0 for m in auto.orig_from_out)
     # With the L1 path asked for: eq. 18's window at the least, zoomed in no further than the eq. 18 paths whose
     # windows it tries (radii 15, 22 and the run's 30).
