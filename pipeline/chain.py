@@ -30,7 +30,7 @@ import numpy as np
 SINGLE_FRAME_WARNING = "only one frame: there is no motion to smooth, written as it is"
 NO_CROP_WARNING = "no area is common to all stabilized frames: crop disabled, borders left black"
 # Crop mode's L1 window without --crop-scale is first tried at the one eq. 18's path at this radius keeps: the room
-# the shake within about half a second needs (about what vid.stab's defaults keep: docs/benchmarks-crop-l1.md).
+# the shake within about half a second needs (about what vid.stab's defaults keep: docs/benchmarks-l1-vs-vidstab.md).
 SHAKE_RADIUS_FRAMES = 15
 
 
