@@ -62,6 +62,7 @@ def l1(margin: float) -> smoothing.SmoothingConfig:
 VARIANTS = (("gaussian k=30", "none", smoothing.SmoothingConfig(), None),
             *((f"l1 margin {m:.0%}", "none", l1(m), None) for m in MARGINS),
             ("crop gaussian k=30", "crop", smoothing.SmoothingConfig(), None),
+            ("crop auto (default)", "crop", smoothing.SmoothingConfig(path="auto"), None),
             ("crop l1", "crop", l1(0.03), None),
             ("crop l1 --crop-scale 0.9", "crop", l1(0.03), 0.9),
             ("crop l1 --crop-scale 0.95", "crop", l1(0.03), 0.95))
