@@ -1121,25 +1121,23 @@ def _settings_summary(config: Any) -> list[str]:
         rows.append(f"mode: {_MODE_WORDS.get(mode, mode)}")
     smoothing = getattr(config, "smoothing", None)
     if smoothing is not None:
-        rows.append("camera path: " + ("eq. 18, Gaussian over k = {} frames each side".format(smoothing.radius_frames)
-                                       if smoothing.path == "gaussian" else
-                                       "auto (the L1 program in the crop window where as steady as eq. 18, else "
-                                       "eq. 18)" if smoothing.path == "auto" else f"{smoothing.path} (L1 program)"))
+        words = {"gaussian": f"eq. 18, Gaussian over k = {smoothing.radius_frames} frames each side",
+                 "auto": "auto (the L1 program in the crop window where as steady as eq. 18, else eq. 18)"}
+        rows.append("camera path: " + words.get(smoothing.path, f"{smoothing.path} (L1 program)"))
     deblur = getattr(config, "deblur", None)
     if mode == "full" and deblur is not None:
         rows.append("deblurring: " + (f"on, from neighbours {deblur.min_ratio:g}x sharper within "
                                       f"{deblur.neighbour_frames} frames" if deblur.enabled else "off"))
-    try:  # the mode's own defaults (its camera path differs), and the mode itself against the tool's
+    try:  # the mode's own defaults (its camera path differs); the mode itself against the tool's default mode
         defaults = type(config)(**({"mode": mode} if mode is not None else {}))
-        default_mode = getattr(type(config)(), "mode", None)
     except (TypeError, ValueError):
-        defaults = default_mode = None
-    changed = [] if defaults is None else _changed_settings(config, defaults)
-    if defaults is not None and mode != default_mode:
+        return rows
+    changed = _changed_settings(config, defaults)
+    mode_field = type(config).__dataclass_fields__.get("mode")
+    if mode_field is not None and mode != mode_field.default:
         changed.insert(0, ("mode", mode))
-    if defaults is not None:
-        rows.append("changed from the defaults: " + (", ".join(f"`{name} = {value!r}`" for name, value in changed)
-                                                    if changed else "nothing"))
+    rows.append("changed from the defaults: " + (", ".join(f"`{name} = {value!r}`" for name, value in changed)
+                                                if changed else "nothing"))
     return rows
 
 
