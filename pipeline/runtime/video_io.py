@@ -682,11 +682,12 @@ def x264_cpu_params(cpuinfo: Path = Path("/proc/cpuinfo")) -> tuple[str, ...]:
         text = cpuinfo.read_text(errors="replace")
     except OSError:
         return ()
-    flags = next((line.split(":", 1)[1].split() for line in text.splitlines() if line.startswith("flags")), [])
+    lines = text.splitlines()
+    flags = next((line.split(":", 1)[1].split() for line in lines if line.startswith("flags")), [])
     if "avx512f" not in flags:
         return ()
     names = [name for flag, name in _X264_INSTRUCTION_SETS if flag in flags]
-    if any(line.startswith("clflush size") and line.split(":", 1)[1].strip() == "64" for line in text.splitlines()):
+    if any(line.startswith("clflush size") and line.split(":", 1)[1].strip() == "64" for line in lines):
         names.append("Cache64")
     return (f"asm={','.join(names)}",)
 
