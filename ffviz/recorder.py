@@ -154,6 +154,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "smoothed_trajectory": _TRAJECTORY[ent.TRAJECTORY_SMOOTHED],
         "settings": (ent.PATH_SETTINGS,),
         "setting_of": (ent.PATH_SETTING,),
+        "planner": NotRecorded("the settings' labels name it (auto's choice included)"),
     },
     "AdaptiveCrop": {
         "scales": (ent.CROP_SCALE, ent.CROP_WINDOW),

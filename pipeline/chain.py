@@ -45,13 +45,14 @@ def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, heig
 
 def _compare_paths(plan: PathPlan, config: StabilizeConfig, width: int, height: int) -> PathComparison:
     """Eq. 18's and the L1 path's trajectories on the same motion (the run's own where it follows one of them
-    alone) and, in crop mode, where each output frame's corners lie in its input frame."""
+    alone; for crop mode's auto, the one it chose) and, in crop mode, where each output frame's corners lie in its
+    input frame."""
     curr_from_prev = (plan.motion.curr_from_prev if plan.rolling_shutter is None
                       else plan.rolling_shutter.curr_from_prev)
     own = config.smoothing
     trajectories = {}
     for path in ("gaussian", "l1"):
-        if own.path == path and not own.segments:
+        if plan.smoothing.planner == path and not own.segments:
             trajectories[path] = plan.smoothing.smoothed_trajectory
         else:
             other = dataclasses.replace(own, path=path, segments=())

@@ -184,7 +184,7 @@ def test_crop_mode_default_path_is_never_shakier_than_eq18_and_keeps_as_much(see
     """Crop mode's default (auto): the L1 path in the widest window, from the one eq. 18's path at
     SHAKE_RADIUS_FRAMES keeps down to eq. 18's own, where it is as steady as eq. 18's path (by chain._shake_px),
     else eq. 18's path. So it is never shakier than eq. 18's by that measure, keeps at least as much of the frame
-    as eq. 18's crop, and shows no invalid pixel. The L1 program zooms in past its window no further than eq. 18's
+    as eq. 18's crop, and shows no invalid pixel; the recording's comparison draws the path it chose as its own. The L1 program zooms in past its window no further than eq. 18's
     path does: a constant zoom-in costs it nothing and would buy room by cropping more than the window (vplab_C's
     output kept 0.866 of its size for a 0.893 window before the bound)."""
     video = generate(SyntheticConfig(n_frames=90, moving_object=False, blurred_frames=(), jitter_deg=1.5,
@@ -201,6 +201,11 @@ def test_crop_mode_default_path_is_never_shakier_than_eq18_and_keeps_as_much(see
 
     assert kept(auto) >= kept(eq18) - 1e-3
     assert auto.smoothing.settings[0] in ("l1", "gaussian:k=30")  # the path it planned, as the recording names it
+    # The comparison the recording draws shows the run's own path as the line of the planner it chose (the L1 line
+    # was once the margins-only L1 path whatever auto chose).
+    chose = {"l1": "l1", "gaussian:k=30": "gaussian"}[auto.smoothing.settings[0]]
+    assert auto.smoothing.planner == chose
+    np.testing.assert_array_equal(getattr(auto.paths(), chose), auto.smoothing.smoothed_trajectory)
     assert all(_invalid_pixels(m) == 0 for m in auto.orig_from_out)
     # With the L1 path asked for: eq. 18's window at the least, zoomed in no further than the eq. 18 paths whose
     # windows it tries (radii 15, 22 and the run's 30).

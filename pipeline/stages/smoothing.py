@@ -121,6 +121,9 @@ class SmoothingResult:
     smoothed_trajectory: np.ndarray
     settings: tuple[str, ...] = ()  # the path settings used, in the command line's words (path_control segments)
     setting_of: np.ndarray | None = None  # (N,) index into settings of the one each frame was planned with
+    # The planner that made the path: "gaussian" (eq. 18), "l1" or "tripod" (the L1 program); never "auto", which
+    # is eq. 18's here and whichever crop mode's planner chose there (pipeline/chain.py)
+    planner: str = "gaussian"
 
     @property
     def stab_from_orig(self) -> np.ndarray:
@@ -161,7 +164,8 @@ def smooth(curr_from_prev: np.ndarray, config: SmoothingConfig = SmoothingConfig
                                                     setting_of, blend, width, height)
     result = _finish(curr_from_prev, orig_from_stab, segment_starts, config, width, height)
     labels = (config.label(), *(segment.label() for segment in config.segments))
-    return dataclasses.replace(result, settings=labels, setting_of=setting_of)
+    return dataclasses.replace(result, settings=labels, setting_of=setting_of,
+                               planner="gaussian" if config.path == "auto" else config.path)
 
 
 def _plan_shot(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: int, last: int,
