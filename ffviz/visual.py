@@ -7,7 +7,8 @@ import numpy as np
 
 
 def flow_to_rgb(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndarray:
-    """Middlebury-style colour coding: hue = direction, saturation = magnitude; NaN flow is black."""
+    """Middlebury-style colour coding: hue = direction, saturation = magnitude; NaN flow (none computed there) in
+    NO_VALUE_COLOUR, the grey of every map's "no value" (no flow colour is grey: their value is always full)."""
     valid = np.isfinite(flow).all(axis=-1)
     fx = np.where(valid, flow[..., 0], 0.0).astype(np.float32)
     fy = np.where(valid, flow[..., 1], 0.0).astype(np.float32)
@@ -16,8 +17,10 @@ def flow_to_rgb(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndar
     hsv = np.zeros((*flow.shape[:2], 3), np.uint8)
     hsv[..., 0] = (angle / 2).astype(np.uint8)
     hsv[..., 1] = np.clip(magnitude / scale * 255, 0, 255).astype(np.uint8)
-    hsv[..., 2] = np.where(valid, 255, 0).astype(np.uint8)
-    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    hsv[..., 2] = 255
+    rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    rgb[~valid] = NO_VALUE_COLOUR
+    return rgb
 
 
 def sparse_arrows(flow: np.ndarray, step: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -134,8 +137,9 @@ def colour_bar(colormap: str, low: float, high: float, unit: str, title: str, *,
 
 
 def flow_wheel(size: int = 200) -> np.ndarray:
-    """The flow colour key: hue = direction, saturation = magnitude (rim: the frame's flow scale)."""
-    height = size + 40
+    """The flow colour key: hue = direction, saturation = magnitude (rim: the frame's flow scale), and the
+    "no value" swatch (where no flow was computed)."""
+    height = size + 62
     image = np.full((height, size, 3), KEY_BACKGROUND, np.uint8)
     radius = size // 2 - 20
     ys, xs = np.mgrid[-radius:radius + 1, -radius:radius + 1].astype(np.float32)
@@ -149,7 +153,10 @@ def flow_wheel(size: int = 200) -> np.ndarray:
     _text(image, "flow direction = hue", (6, 14), 0.42)
     _text(image, "+x", (centre[0] + radius - 14, centre[1] + 5), 0.4)
     _text(image, "+y (down)", (centre[0] - 30, top + 2 * radius + 14), 0.4)
-    _text(image, "rim: 99th pct magnitude", (6, height - 6), 0.4)
+    _text(image, "rim: 99th pct magnitude", (6, size + 34), 0.4)
+    cv2.rectangle(image, (6, size + 44), (28, size + 56), NO_VALUE_COLOUR, -1)
+    cv2.rectangle(image, (6, size + 44), (28, size + 56), KEY_TEXT, 1)
+    _text(image, "no value: not computed", (34, size + 55), 0.4)
     return image
 
 

@@ -513,6 +513,23 @@ def test_colour_mapped_pictures_follow_the_key():
     np.testing.assert_array_equal(rgba[0, 4:], 0)
 
 
+def test_flow_pictures_show_no_value_in_the_keys_grey_and_every_flow_in_colour():
+    """visual.flow_to_rgb: where no flow was computed (NaN), the grey every key names "no value", which no flow
+    colour is (their HSV value is always full); zero flow white, a flow at the scale a saturated hue. The flow key
+    carries the same grey swatch. (No value was once black, which the key did not name.)"""
+    flow = np.array([[[0.0, 0.0], [3.0, 0.0], [0.0, -3.0], [np.nan, np.nan], [1.0, np.nan]]], np.float32)
+    rgb = visual.flow_to_rgb(flow, max_magnitude=3.0)
+    np.testing.assert_array_equal(rgb[0, 3:], [visual.NO_VALUE_COLOUR] * 2)
+    np.testing.assert_array_equal(rgb[0, 0], (255, 255, 255))
+    assert rgb[0, 1].max() == 255 and rgb[0, 1].min() == 0 and rgb[0, 2].max() == 255 and rgb[0, 2].min() == 0
+    angles = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+    for magnitude in (0.0, 0.5, 1.0, 2.0):
+        every = np.stack([np.cos(angles), np.sin(angles)], axis=-1)[None].astype(np.float32) * magnitude
+        assert (visual.flow_to_rgb(every, max_magnitude=1.0).max(axis=-1) == 255).all()
+    key = visual.flow_wheel()
+    assert (key == visual.NO_VALUE_COLOUR).all(axis=-1).sum() >= 100  # the swatch
+
+
 def test_every_colour_mapped_entity_has_a_colour_key(compact_run, full_run):
     for recording in (compact_run[1], full_run[0]):
         for entity, key in ent.KEY_OF.items():
