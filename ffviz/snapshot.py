@@ -10,6 +10,7 @@ The native viewer decodes H.264 frame streams with the `ffmpeg` executable: it m
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -83,12 +84,19 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
         layout.save(APPLICATION_ID, str(rbl))
         port = _free_port()
         env = dict(os.environ, RERUN_ANALYTICS="0")
-        viewer = subprocess.Popen(
-            [rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port), "--window-size",
-             f"{size[0]}x{size[1]}", str(recording), str(rbl)],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        log = Path(folder) / "viewer.log"
+        with open(log, "wb") as log_file:
+            viewer = subprocess.Popen(
+                [rerun_executable(), "--headless", "--bind", "127.0.0.1", "--port", str(port), "--window-size",
+                 f"{size[0]}x{size[1]}", str(recording), str(rbl)],
+                env=env, stdout=subprocess.DEVNULL, stderr=log_file, start_new_session=True)
         try:
             png = _drive(ViewerClient, port, viewer, frame, time.monotonic() + timeout_s)
+        except Exception as error:  # noqa: BLE001 - the viewer's own account first, where it stopped
+            stopped = viewer.poll() is not None or _wait_stopped(viewer)
+            if stopped:
+                raise InputError(viewer_stopped(viewer.returncode, log.read_text(errors="replace"))) from None
+            raise error
         finally:
             stop_process_group(viewer)
     if output.suffix.lower() == ".png":
@@ -100,6 +108,26 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
         image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
         cv2.imwrite(str(output), image, [cv2.IMWRITE_JPEG_QUALITY, 88])
     return output
+
+
+def _wait_stopped(viewer: subprocess.Popen, seconds: float = 2.0) -> bool:
+    try:
+        viewer.wait(seconds)
+    except subprocess.TimeoutExpired:
+        return False
+    return True
+
+
+def viewer_stopped(returncode: int | None, log: str) -> str:
+    """One line on why the headless viewer stopped, from its exit status and its stderr (a Rust panic names its
+    cause: 'Failed to get render context' where neither Vulkan nor OpenGL can render)."""
+    panic = re.search(r"panicked at '([^']+)'", log) or re.search(r"panicked at [^\n]*\n([^\n]+)", log)
+    reason = f": {panic.group(1).strip()}" if panic else ""
+    hint = ""
+    if "render context" in reason:
+        hint = (" (no renderer: the headless viewer draws with software Vulkan; Debian: apt-get install "
+                "mesa-vulkan-drivers; ./run test installs it)")
+    return f"the headless viewer stopped (exit {returncode}){reason}{hint}"
 
 
 def _drive(client_type, port: int, viewer: subprocess.Popen, frame: int, deadline: float) -> bytes:

@@ -362,9 +362,16 @@ def test_a_real_full_recording_opens_on_frame_0_and_steps_to_the_last(real_recor
 
 # -- ffviz snapshot: the native viewer, headless ----------------------------------------------------------------
 
+def vulkan_drivers() -> list[str]:
+    """The Vulkan drivers the loader can find (the headless viewer renders with lavapipe, Mesa's CPU driver)."""
+    return [str(p) for folder in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d") for p in Path(folder).glob("*.json")]
+
+
 def test_snapshot_shows_the_asked_frame_on_the_asked_tab(tmp_path):
     if shutil.which("ffmpeg") is None:
         pytest.skip("the native viewer decodes H.264 with the ffmpeg executable (apt-get install ffmpeg)")
+    if not vulkan_drivers():
+        pytest.skip("no Vulkan driver for the headless viewer (apt-get install mesa-vulkan-drivers)")
     video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=12, seed=4, jitter_px=8.0))
     clip = tmp_path / "clip.mp4"
     synthetic.write_video(video, clip)
@@ -386,3 +393,17 @@ def test_snapshot_shows_the_asked_frame_on_the_asked_tab(tmp_path):
     result = subprocess.run([sys.executable, "-m", "ffviz.cli", "snapshot", str(rrd), "--tab", "nope", "-o",
                              str(tmp_path / "x.png")], env=env, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "overview" in result.stderr
+
+
+def test_a_viewer_that_cannot_render_is_told_in_one_line_with_its_remedy():
+    """What `ffviz snapshot` says when the headless viewer stops: its exit status, the cause its panic names,
+    and for a missing renderer the package that brings one (it once printed 'internal error: ConnectionError')."""
+    from ffviz.snapshot import viewer_stopped
+
+    old_style = "INFO listening\nthread 'main' panicked at 'Failed to get render context'\nre_viewer/src/app/mod.rs:1425\n"
+    new_style = "thread 'main' panicked at re_viewer/src/app/mod.rs:1425:9:\nFailed to get render context\nnote: ...\n"
+    for log in (old_style, new_style):
+        line = viewer_stopped(102, log)
+        assert "\n" not in line and "exit 102" in line and "Failed to get render context" in line
+        assert "mesa-vulkan-drivers" in line
+    assert viewer_stopped(1, "nothing useful") == "the headless viewer stopped (exit 1)"
