@@ -84,7 +84,7 @@ COMPLETION_STATS = "completion/stats"  # /{missing,mosaic,local_warp,fallback}: 
 
 DEBLUR_BLURRINESS = "deblur/blurriness"  # b_t (eq. 28), every frame
 DEBLUR_NEIGHBOURS = "deblur/neighbours"  # how many sharper neighbours were interpolated from (eq. 30)
-DEBLUR_WEIGHTS = "deblur/weights"  # share of each output pixel from the neighbours (eq. 30), uint8
+DEBLUR_WEIGHTS = "deblur/weights"  # share of each output pixel from the neighbours (eq. 30): picture; uint8 at /values
 DEBLUR_WEIGHTS_SCALE = 255.0  # deblur/weights value of a share of 1
 DEBLUR_SOURCE = "deblur/source"  # per pixel: the neighbour that gave it most (eq. 30), or refused (other content)
 DEBLUR_REFUSED = "deblur/refused"  # share of the frame where a sharper neighbour was refused, every frame

@@ -239,7 +239,7 @@ def deblurring(recording: Recording, requested: Sequence[int] | None = None) -> 
     for t in frames:
         images = [recording.image(ent.DEBLUR_BEFORE, t), recording.image(ent.DEBLUR_AFTER, t)]
         if has_weights:
-            images.append(recording.image(ent.DEBLUR_WEIGHTS, t) / ent.DEBLUR_WEIGHTS_SCALE)
+            images.append(recording.image(ent.map_values(ent.DEBLUR_WEIGHTS), t) / ent.DEBLUR_WEIGHTS_SCALE)
         rows.append((f"frame {t}", images))
     titles = ["before", "after (eq. 30)"] + (["share from the neighbours"] if has_weights else [])
     fig, axes = _image_grid(rows, titles, "Deblurring by interpolating sharper neighbours")

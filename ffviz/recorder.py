@@ -248,7 +248,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "before": (ent.DEBLUR_BEFORE,),
         "blurriness": (ent.DEBLUR_BLURRINESS,),
         "neighbours": (ent.DEBLUR_NEIGHBOURS,),
-        "weights": (ent.DEBLUR_WEIGHTS,),
+        "weights": (ent.DEBLUR_WEIGHTS, ent.map_values(ent.DEBLUR_WEIGHTS)),
         "ratios": NotRecorded("b_t / b_t' per neighbour compared; the blurriness series shows b_t"),
         "provenance": (ent.DEBLUR_SOURCE, ent.DEBLUR_REFUSED),
     },
@@ -862,7 +862,8 @@ class RerunRecorder:
         else:
             self.rec.log(ent.DEBLUR_SOURCE, rr.Clear(recursive=False))
         if not neighbours:  # nothing was sharpened: clear, so the viewer shows no stale frame from earlier
-            for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS):
+            for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS,
+                           ent.map_values(ent.DEBLUR_WEIGHTS)):
                 self.rec.log(entity, rr.Clear(recursive=False))
             return
         # Sparse video streams (only sharpened frames; cleared in between, which hides them there).
@@ -874,8 +875,13 @@ class RerunRecorder:
             quantised = np.clip(np.asarray(weights, np.float32) * ent.DEBLUR_WEIGHTS_SCALE + 0.5, 0, 255).astype(np.uint8)
             if not self.lossless:  # steps of 1/32 (multiples of 8): a third of the PNG's bytes (docs/recording.md)
                 quantised = np.minimum(np.rint(quantised / WEIGHTS_STEP) * WEIGHTS_STEP, 255).astype(np.uint8)
-            # 8-bit PNG: lossless for the stored values, ~20 kB instead of 230 kB at 640x360.
-            self.rec.log(ent.DEBLUR_WEIGHTS, rr.EncodedDepthImage(
+            # What the view shows: the weights in their key's colours, a paletted PNG. (Logged as a depth image with
+            # a colour map, rerun 0.41 drew every weight in the map's lowest colour.)
+            shares = quantised.astype(np.float32) / np.float32(ent.DEBLUR_WEIGHTS_SCALE)
+            picture = indexed_png(visual.map_indices(shares, (0.0, 1.0)), visual.map_palette("viridis"))
+            self.rec.log(ent.DEBLUR_WEIGHTS, rr.EncodedImage(contents=picture, media_type="image/png"))
+            # The values, for reading back: an 8-bit PNG, lossless for the stored values (~20 kB, not 230 kB).
+            self.rec.log(ent.map_values(ent.DEBLUR_WEIGHTS), rr.EncodedDepthImage(
                 png16(quantised), media_type="image/png", meter=ent.DEBLUR_WEIGHTS_SCALE, colormap="viridis",
                 depth_range=(0.0, ent.DEBLUR_WEIGHTS_SCALE)))
 

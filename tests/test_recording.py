@@ -147,12 +147,19 @@ def test_deblur_family_matches_the_pipeline(full_run):
     np.testing.assert_array_equal(recording.scalars(ent.DEBLUR_NEIGHBOURS)[1], [len(deblurred[t].neighbours) for t in frames])
     sharpened = [t for t in frames if deblurred[t].neighbours]
     assert sharpened, "the clip's blurred frames should have sharper neighbours"
-    for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS):
+    for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS, ent.map_values(ent.DEBLUR_WEIGHTS)):
         assert recording.indices(entity) == sharpened, entity
     t = sharpened[0]
     np.testing.assert_array_equal(recording.image(ent.DEBLUR_BEFORE, t), deblurred[t].before)
     np.testing.assert_array_equal(recording.image(ent.DEBLUR_AFTER, t), deblurred[t].frame)
-    assert_weights(recording.image(ent.DEBLUR_WEIGHTS, t), deblurred[t].weights)
+    stored = recording.image(ent.map_values(ent.DEBLUR_WEIGHTS), t)
+    assert_weights(stored, deblurred[t].weights)
+    # The view shows the stored weights in the key's colours, opaque (as a depth image with a colour map, rerun
+    # drew every weight in the map's lowest colour).
+    shown = recording.image(ent.DEBLUR_WEIGHTS, t)
+    expected = visual.colour_mapped(stored.astype(np.float32) / ent.DEBLUR_WEIGHTS_SCALE, "viridis", (0.0, 1.0))
+    np.testing.assert_array_equal(shown, expected)
+    assert (shown[..., 3] == 255).all() and stored.max() > stored.min()
     # Where each pixel came from: the main source's offset, and the refused pixels, per frame.
     np.testing.assert_allclose(recording.scalars(ent.DEBLUR_REFUSED)[1],
                                [0.0 if deblurred[f].refused is None else deblurred[f].refused.mean() for f in frames])
@@ -314,12 +321,12 @@ def test_deblur_results_are_recorded(tmp_path):
     np.testing.assert_allclose(recording.scalars(ent.DEBLUR_BLURRINESS)[1], [2.5e-4, 1.0e-4])
     np.testing.assert_array_equal(recording.scalars(ent.DEBLUR_NEIGHBOURS)[1], [2, 0])
     # Only the sharpened frame has before/after/weights (the other frame clears them).
-    for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS):
+    for entity in (ent.DEBLUR_BEFORE, ent.DEBLUR_AFTER, ent.DEBLUR_WEIGHTS, ent.map_values(ent.DEBLUR_WEIGHTS)):
         assert recording.indices(entity) == [0], entity
         assert recording.rows(entity) == 2, entity
     np.testing.assert_array_equal(recording.image(ent.DEBLUR_BEFORE, 0), sharpened.before)
     np.testing.assert_array_equal(recording.image(ent.DEBLUR_AFTER, 0), sharpened.frame)
-    assert_weights(recording.image(ent.DEBLUR_WEIGHTS, 0), sharpened.weights)
+    assert_weights(recording.image(ent.map_values(ent.DEBLUR_WEIGHTS), 0), sharpened.weights)
     np.testing.assert_array_equal(recording.image(ent.trace_image(0), 4, ent.STAGE_TIMELINE), sharpened.frame)
 
 
@@ -343,7 +350,7 @@ def test_real_deblur_results_are_recorded(tmp_path):
     np.testing.assert_array_equal(recording.scalars(ent.DEBLUR_NEIGHBOURS)[1], [1, 0])
     assert recording.indices(ent.DEBLUR_AFTER) == [0]
     np.testing.assert_array_equal(recording.image(ent.DEBLUR_AFTER, 0), sharpened.frame)
-    assert_weights(recording.image(ent.DEBLUR_WEIGHTS, 0), sharpened.weights)
+    assert_weights(recording.image(ent.map_values(ent.DEBLUR_WEIGHTS), 0), sharpened.weights)
 
 
 # -- the default (compact) recording: video frame streams, PNG masks and maps, colour keys, layout ---------------
@@ -432,7 +439,7 @@ def test_masks_are_exact_and_maps_within_half_a_step(compact_run):
     deblurred = by_frame(collector, "deblur")
     sharpened = [t for t in sorted(deblurred) if deblurred[t].neighbours]
     if sharpened:
-        recorded = recording.image(ent.DEBLUR_WEIGHTS, sharpened[0]) / ent.DEBLUR_WEIGHTS_SCALE
+        recorded = recording.image(ent.map_values(ent.DEBLUR_WEIGHTS), sharpened[0]) / ent.DEBLUR_WEIGHTS_SCALE
         np.testing.assert_allclose(recorded, deblurred[sharpened[0]].weights,
                                    atol=(WEIGHTS_STEP / 2 + 0.5) / ent.DEBLUR_WEIGHTS_SCALE + 1e-6)
 
