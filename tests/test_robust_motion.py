@@ -78,6 +78,44 @@ def test_first_pair_prefers_the_motion_whose_tracks_spread_wider():
     assert motion.choose_background(single, None, 640, 360) is single
 
 
+def test_the_demo_clip_keeps_the_camera_where_a_small_disc_moves_like_the_last_pair(monkeypatch):
+    """The built-in demo's own clip (seed 0, 120 frames: a disc moving over a shaken photograph): every pair's
+    motion within 1.5 px of the truth. Its shake changes the camera's motion by 10-15 px between pairs, and at
+    frames 42, 49 and 52 the disc's 17 tracks continued the last pair's camera motion a few px better than the
+    background's 58: by continuity alone the camera took the disc's motion (11-19 px off)."""
+    video = generate(SyntheticConfig(n_frames=120, seed=0))
+    assert estimate_motion_errors(video, StabilizeConfig().motion) < 1.5
+    # The same clip by continuity alone (no majority-and-spread check) follows the disc.
+    monkeypatch.setattr(motion, "_spread", lambda points: 0.0)  # every spread equal: the check never holds
+    assert estimate_motion_errors(video, StabilizeConfig().motion) > 10.0
+
+
+def test_continuity_does_not_overrule_a_majority_that_also_spreads_wider():
+    """A pair after a pair with one motion: RANSAC kept the background (more tracks, all over the frame); a small
+    object's motion continues the last camera motion better. The background stays; with the object holding the
+    more tracks, continuity decides as before."""
+    rng = np.random.default_rng(1)
+    background = rng.uniform([0, 0], [640, 360], (58, 2)).astype(np.float32)
+    disc = rng.uniform([200, 150], [260, 210], (17, 2)).astype(np.float32)
+    last = np.array([[1, 0, 6.0], [0, 1, -9.0], [0, 0, 1]])
+    camera = np.array([[1, 0, -5.0], [0, 1, 4.0], [0, 0, 1]])  # the hand jerked the other way
+    mover = np.array([[1, 0, 2.0], [0, 1, -5.0], [0, 0, 1]])  # nearer the last camera motion
+    previous = motion.MotionEstimate(curr_from_prev=last, status="ok")
+
+    def pair(kept, kept_points, other, other_points):
+        points = np.concatenate([kept_points, other_points])
+        return motion.MotionEstimate(
+            curr_from_prev=kept, status="ok", n_tracked=len(points), n_inliers=len(kept_points), prev_points=points,
+            curr_points=points, inliers=np.r_[np.ones(len(kept_points), bool), np.zeros(len(other_points), bool)],
+            alternative=other, alternative_prev_points=other_points, alternative_curr_points=other_points)
+
+    kept = motion.choose_background(pair(camera, background, mover, disc), previous, 640, 360)
+    assert not kept.chose_alternative and np.allclose(kept.curr_from_prev, camera)
+    many_on_object = rng.uniform([150, 100], [310, 260], (120, 2)).astype(np.float32)
+    swapped = motion.choose_background(pair(camera, background, mover, many_on_object), previous, 640, 360)
+    assert swapped.chose_alternative  # the kept motion is no longer the majority: continuity decides
+
+
 def test_an_ignore_mask_video_keeps_features_off_the_figure(tmp_path, monkeypatch):
     """A mask video of the figure (white where it is, frame by frame): every feature on it is dropped, so even
     RANSAC alone (the automatic choice switched off) follows the background."""

@@ -310,9 +310,11 @@ def choose_background(estimate: MotionEstimate, previous: MotionEstimate | None,
     in front of it, so its tracks spread wider. Where the pair before also held two motions, by place: this pair's tracks start in the frame the pair before
     ended in, so each of its tracks is labelled by the nearest track end of the pair before (background or
     object); the motion whose tracks lie mostly in the background's places is the camera's. An object moves
-    10-25 px a frame, far less than its own size, so the places carry over. Otherwise by continuity: the motion
-    that continues the previous pair's camera motion better by ALTERNATIVE_PRIOR_PX (hand shake changes the
-    camera's motion by a few px from one pair to the next)."""
+    10-25 px a frame, far less than its own size, so the places carry over. Otherwise the motion RANSAC kept stays
+    when it holds the most tracks and they spread wider (both cues say background), and else the camera's is the
+    motion that continues the previous pair's camera motion better by ALTERNATIVE_PRIOR_PX. Continuity alone is
+    weak: a hand's shake can change the camera's motion by 10-15 px from one pair to the next, so a small object
+    moving like the last pair's camera once took the camera's place (the demo's frames 42, 49 and 52)."""
     if estimate.alternative is None or estimate.status != "ok":
         return estimate
     swap = False
@@ -331,7 +333,8 @@ def choose_background(estimate: MotionEstimate, previous: MotionEstimate | None,
         kept = is_background[tree.query(kept_points, k=1)[1]].mean()
         other = is_background[tree.query(estimate.alternative_prev_points, k=1)[1]].mean()
         swap = other > kept
-    else:
+    elif not (len(kept_points) >= len(estimate.alternative_prev_points)
+              and _spread(kept_points) > _spread(estimate.alternative_prev_points)):
         corners = geometry.frame_corners(width, height)
         kept = corner_shift(estimate.curr_from_prev, previous.curr_from_prev, corners)
         other = corner_shift(estimate.alternative, previous.curr_from_prev, corners)
