@@ -40,9 +40,9 @@ TAB_NOTES = {
         "**Local flow** (eq. 23) between a neighbour and the frame over their common area, **motion "
         "inpainting** of that flow into the missing area by Fast Marching (eq. 24, visiting order and arrival "
         "time T) and **local-warp mosaicing** (eq. 25): which neighbour filled each pixel."),
-    "deblurring": ("**Deblurring** (thesis ch. 5): relative blurriness b_t (eq. 28, lower is blurrier); a "
-                   "blurrier frame takes pixels from sharper aligned neighbours, weighted by eqs. 30-31. Before / "
-                   "after show only frames that were sharpened."),
+    "deblurring": ("**Deblurring** (thesis ch. 5): relative blurriness b_t (eq. 28: one over the gradient "
+                   "energy, higher is blurrier); a blurrier frame takes pixels from sharper aligned neighbours, "
+                   "weighted by eqs. 30-31. Before / after show only frames that were sharpened."),
 }
 
 
@@ -183,9 +183,9 @@ def inpainting_tab() -> rrb.Container:
             rrb.Vertical(_image("local flow, 1st neighbour (eqs. 23-24)",
                                 ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS), row_shares=[1]),
             rrb.Vertical(_map("Fast Marching visiting order", ent.COMPLETION_FMM_ORDER),
-                         _key("fmm_order", "visiting order"), row_shares=[4, 1]),
+                         _key("fmm_order", "visiting order"), row_shares=[2, 1]),
             rrb.Vertical(_map("Fast Marching arrival time T", ent.COMPLETION_FMM_ARRIVAL),
-                         _key("fmm_arrival", "arrival time"), row_shares=[4, 1]),
+                         _key("fmm_arrival", "arrival time"), row_shares=[2, 1]),
         ),
         rrb.Horizontal(
             _image("filled by (eq. 25)", ent.COMPLETION_FRAME, ent.COMPLETION_FILLED_BY),
@@ -203,9 +203,9 @@ def deblur_tab() -> rrb.Container:
             _image("before (sharpened frames only)", ent.DEBLUR_BEFORE),
             _image("after (eq. 30)", ent.DEBLUR_AFTER),
             rrb.Vertical(_image("weights (eqs. 30-31)", ent.DEBLUR_WEIGHTS),
-                         _key("deblur_weights", "weights"), row_shares=[4, 1]),
+                         _key("deblur_weights", "weights"), row_shares=[2, 1]),
             rrb.Vertical(_image("source per pixel (red: refused)", ent.DEBLUR_AFTER, ent.DEBLUR_SOURCE),
-                         _key("deblur_source", "source"), row_shares=[4, 1]),
+                         _key("deblur_source", "source"), row_shares=[2, 1]),
         ),
         rrb.Horizontal(
             rrb.TimeSeriesView(name="relative blurriness b_t (eq. 28)", origin=f"/{ent.DEBLUR_BLURRINESS}"),
