@@ -1,8 +1,9 @@
-"""Render docs/img/compare.jpg: a frame of `ffviz compare` on the shared clip vplab_C (its first 2 s).
+"""Render docs/img/compare.jpg: a frame of `ffviz compare` on the built-in demo's clip (generated: ours to publish;
+the shared real clips' licence is unknown, so no picture shows them).
 
 Usage: .venv/bin/python docs/img/make_compare.py [WORK_DIR]   (default: a temporary folder)
 Panels: the input, ffviz --mode crop, and ffmpeg's vid.stab (default options, as the benchmark's peer) when
-Debian's ffmpeg with vid.stab is on PATH; the picture is the output's frame 40.
+Debian's ffmpeg with vid.stab is on PATH; the picture is the output's frame 42.
 """
 
 from __future__ import annotations
@@ -16,10 +17,10 @@ from pathlib import Path
 import cv2
 
 from ffviz import cli
+from pipeline.evaluation import synthetic
 from pipeline.runtime.video_io import VideoReader
 
-CLIP = Path(__file__).resolve().parents[3] / "shared" / "videos" / "vplab_C.avi"
-SECONDS, FRAME = 2, 40
+SECONDS, FRAME = 4, 42
 OUT = Path(__file__).resolve().parent / "compare.jpg"
 
 
@@ -39,11 +40,13 @@ def vidstab(source: Path, target: Path, work: Path) -> bool:
 
 
 def main(work: Path) -> None:
+    clip = work / "demo_input.mp4"  # ./run demo's input: seed 0, 120 frames
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(n_frames=120, seed=0)), clip)
     ffviz_out, vidstab_out, sbs = work / "ffviz_crop.mp4", work / "vidstab.mp4", work / "sbs.mp4"
-    assert cli.main(["stabilize", str(CLIP), "-o", str(ffviz_out), "--mode", "crop", "--preview", str(SECONDS),
+    assert cli.main(["stabilize", str(clip), "-o", str(ffviz_out), "--mode", "crop", "--preview", str(SECONDS),
                      "--overwrite"]) == 0
-    panels, labels = [str(CLIP), str(ffviz_out)], "vplab_C.avi (input),ffviz --mode crop"
-    if vidstab(CLIP, vidstab_out, work):
+    panels, labels = [str(clip), str(ffviz_out)], "demo input,ffviz --mode crop"
+    if vidstab(clip, vidstab_out, work):
         panels.append(str(vidstab_out))
         labels += ",ffmpeg vid.stab"
     assert cli.main(["compare", *panels, "-o", str(sbs), "--labels", labels, "--shortest", "--overwrite"]) == 0
