@@ -523,7 +523,7 @@ class RerunRecorder:
                   f"{ent.COMPLETION_STATS}/fallback": ("fallback", (255, 200, 0))}
         for entity, (name, colour) in styles.items():
             self.rec.log(entity, rr.SeriesLines(names=name, colors=[colour], widths=2.0), static=True)
-        self.rec.log(ent.DEBLUR_REFUSED, rr.SeriesLines(names="refused (share of the frame)", colors=[(230, 40, 60)]),
+        self.rec.log(ent.DEBLUR_REFUSED, rr.SeriesLines(names="a neighbour refused (share)", colors=[(230, 40, 60)]),
                      static=True)
         self.rec.log(ent.DEBLUR_BLURRINESS, rr.SeriesLines(names="blurriness b_t", colors=[(200, 80, 200)]), static=True)
         self.rec.log(ent.DEBLUR_NEIGHBOURS, rr.SeriesLines(names="sharper neighbours used", colors=[(90, 160, 90)]),
@@ -571,11 +571,11 @@ class RerunRecorder:
                 [("mosaic", (40, 200, 90, 170)), ("fallback", (255, 200, 0, 200))]
                 + [(f"neighbour {o:+d}", c) for o, c in ((-10, _offset_colour(-10)), (-1, _offset_colour(-1)),
                                                           (1, _offset_colour(1)), (10, _offset_colour(10)))],
-                "filled by (neighbours: blue = earlier, red = later)"),
+                "filled by (neighbours: blue = earlier, orange = later)"),
             "deblur_source": visual.palette_key(
-                [("refused: other content", (230, 40, 60, 200))]
+                [("own: every sharper one refused (other content)", (230, 40, 60, 200))]
                 + [(f"from neighbour {o:+d}", c) for o, c in ((-5, _offset_colour(-5)), (5, _offset_colour(5)))],
-                "deblurred pixel from"),
+                "pixel from (blue: earlier, orange: later)"),
         }
     def on_motion(self, stamp: Stamp, estimate: MotionEstimate) -> None:
         self._submit(self._timed, self._on_motion, stamp, estimate)
@@ -1014,22 +1014,25 @@ class RerunRecorder:
 
     @staticmethod
     def _deblur_source_classes(result: Any) -> np.ndarray:
-        """Class per pixel: 0 the frame's own, 1 refused, FILLED_BY_BASE + offset the neighbour that gave most."""
+        """Class per pixel: FILLED_BY_BASE + offset the neighbour that gave most (5 % or more); 1 where none gave
+        and a sharper neighbour was refused (other content: the frame keeps its own pixel for that reason); 0 the
+        frame's own. (Marking every pixel where some neighbour was refused painted nearly whole frames red on real
+        footage, where a far neighbour is refused almost everywhere while the near ones give most of the pixel.)"""
         shape = result.frame.shape[:2]
         classes = np.zeros(shape, np.uint8)
         source = getattr(result, "main_source", None)
-        if source is not None:
-            taken = source != 0
+        taken = np.zeros(shape, bool) if source is None else source != 0
+        if taken.any():
             classes[taken] = (FILLED_BY_BASE + source[taken].astype(np.int16)).astype(np.uint8)
         refused = getattr(result, "refused", None)
         if refused is not None:
-            classes[refused] = 1
+            classes[refused & ~taken] = 1
         return classes
 
     @staticmethod
     @functools.cache
     def _deblur_source_legend(max_offset: int = 30) -> tuple:
-        legend = [(0, "own frame", (0, 0, 0, 0)), (1, "refused: other content", (230, 40, 60, 200))]
+        legend = [(0, "own frame", (0, 0, 0, 0)), (1, "own: every sharper neighbour refused", (230, 40, 60, 200))]
         for offset in range(-max_offset, max_offset + 1):
             if offset:
                 legend.append((FILLED_BY_BASE + offset, f"from neighbour {offset:+d}", _offset_colour(offset, 170)))

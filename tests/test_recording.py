@@ -165,10 +165,11 @@ def test_deblur_family_matches_the_pipeline(full_run):
                                [0.0 if deblurred[f].refused is None else deblurred[f].refused.mean() for f in frames])
     source = recording.image(ent.DEBLUR_SOURCE, t).astype(int)
     result = deblurred[t]
-    np.testing.assert_array_equal(source == 1, result.refused)
-    taken = (result.main_source != 0) & ~result.refused
+    # Red where a sharper neighbour was refused and none gave the pixel; elsewhere the neighbour that gave most.
+    taken = result.main_source != 0
+    np.testing.assert_array_equal(source == 1, result.refused & ~taken)
     np.testing.assert_array_equal(source[taken] - FILLED_BY_BASE, result.main_source[taken])
-    assert taken.any()
+    assert taken.any() and (result.refused & taken).any()  # some refusals hide under a neighbour's pixels
 
 
 def test_log_and_meta(full_run):
