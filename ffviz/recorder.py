@@ -432,6 +432,7 @@ class RerunRecorder:
         self._colour = ColourDescription()  # the input's (on_start): frames are shown as display RGB by it
         self._config: Any = None
         self._crop: Any = None
+        self._planned: str | None = None  # the path setting the plan followed (crop mode's auto: the one it chose)
         self._adaptive: AdaptiveCrop | None = None
         self._warnings = 0
         self._log_lines = 0  # lines logged to ent.LOG (warnings and notes): the about tab's table only when any
@@ -688,6 +689,7 @@ class RerunRecorder:
             self.rec.send_columns(entity, indexes=indexes, columns=rr.Scalars.columns(scalars=np.array(skew)[:, column]))
 
     def _on_path(self, plan: PathPlan) -> None:
+        self._planned = plan.smoothing.settings[0] if plan.smoothing.settings else None
         self._on_smoothing(plan.smoothing)
         if plan.paths is not None:
             self._on_paths(plan.paths())
@@ -1042,12 +1044,13 @@ class RerunRecorder:
         """The about tab: a readable summary of the run, rewritten (static) as more becomes known."""
         text = self._meta_markdown(self._info, self._config, report=report, crop=self._crop, warnings=self._warnings,
                                    level=self.level, lossless=self.lossless,
-                                   seconds_logging=self.seconds_logging)
+                                   seconds_logging=self.seconds_logging, planned=self._planned)
         self.rec.log(ent.META, rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
 
     @staticmethod
     def _meta_markdown(info: Any, config: Any, *, report: Any = None, crop: Any = None, warnings: int = 0,
-                       level: str = "full", lossless: bool = False, seconds_logging: float = 0.0) -> str:
+                       level: str = "full", lossless: bool = False, seconds_logging: float = 0.0,
+                       planned: str | None = None) -> str:
         lines = ["# About this recording", "",
                  f"- ffviz {ffviz.__version__}, rerun-sdk {rr.__version__} (open it with the same rerun version)"]
         if info is not None:
@@ -1064,6 +1067,9 @@ class RerunRecorder:
                      "values as 16-bit PNG"))
         if config is not None:
             lines += ["", "## Settings", ""] + [f"- {row}" for row in _settings_summary(config)]
+            if planned is not None and getattr(getattr(config, "smoothing", None), "path", None) == "auto":
+                chose = "the L1 program in the crop window" if planned.startswith("l1") else "eq. 18's path"
+                lines.append(f"- auto chose: {chose} (`{planned}`)")
         if crop is not None and hasattr(crop, "scales"):  # --crop adaptive
             lines.append(f"- adaptive crop: scale {crop.scales.min():.3f}-{crop.scales.max():.3f} about "
                          f"({crop.anchor[0]:.1f}, {crop.anchor[1]:.1f}), {crop.cropping_ratio:.1%} of the area kept "
