@@ -148,7 +148,7 @@ def smoothing_tab(crop: bool = False) -> rrb.Container:
                 _key("missing", "missing area"),
                 _image("input; the output's corners in yellow (--mode crop: the crop-window constraint)",
                        ent.INPUT_FRAME, ent.CROP_CONSTRAINT),
-                row_shares=[4, 4, 1, 4],
+                row_shares=[4, 4, 1.6, 4],
             ),
         ),
         _note("smoothing"),
