@@ -10,7 +10,12 @@ them in the previous and the current frame (CompletionResult.source), against th
 completed frame is carried onto frame t by the stabilizer's own transforms (S_{t-1}^-1 M_t^-1 S_t, no estimation
 error); pixels within 2 px of either frame's missing-area outline count as neither, as in pipeline.evaluation.metrics.
 
+With --split, each row is followed by the same PSNRs over the pixels our chain filled by each stage (mosaic, local
+warp, fallback: which stage's pixels lose) and the frames where ours loses most against mosaic+telea (a few frames
+usually hold the whole difference). --cases keeps the rows whose name holds one of the given words.
+
 Usage: python benchmarks/completion_psnr.py [--frames 48] [--clips a.mp4,b.avi] [--skip-real] [--skip-speed]
+                                            [--cases astronaut,chelsea] [--split]
        python benchmarks/completion_psnr.py --flicker ../shared/videos/selh_asb_1.mp4
 """
 
@@ -43,11 +48,27 @@ SYNTHETIC = (("coffee", 1), ("coffee", 2), ("astronaut", 3), ("chelsea", 4), ("r
 REAL = ("linyihaolyh_shaky.mp4", "vplab_C.avi", "selh_tasc.mp4", "sudheerachary_small-shaky-5.avi")
 
 
-def _row(name: str, scores: CompletionScores, seconds: float) -> str:
+def _row(name: str, scores: CompletionScores, seconds: float, split: bool = False) -> str:
     ours = scores.psnr("ours")
     cells = " ".join(f"{scores.psnr(m):>12.2f}" for m in METHODS)
-    return (f"{name:34} {cells} {ours - scores.psnr('mosaic+telea'):>+8.2f} {ours - scores.psnr('telea'):>+8.2f} "
+    line = (f"{name:34} {cells} {ours - scores.psnr('mosaic+telea'):>+8.2f} {ours - scores.psnr('telea'):>+8.2f} "
             f"{scores.pixels / max(scores.frames, 1) / 1000:>8.1f} {seconds:>6.0f}")
+    if not split:
+        return line
+    lines = [line]
+    total = {m: max(scores.squared_error[m], 1e-9) for m in METHODS}
+    for source, part in scores.by_source.items():
+        cells = " ".join(f"{part.psnr(m):>12.2f}" for m in METHODS)
+        shares = (part.pixels / max(scores.pixels, 1), part.squared_error["ours"] / total["ours"],
+                  part.squared_error["mosaic+telea"] / total["mosaic+telea"])
+        lines.append(f"  {source:32} {cells} {part.psnr('ours') - part.psnr('mosaic+telea'):>+8.2f}   share "
+                     f"{shares[0]:.3f} of pixels, {shares[1]:.3f} of our error, {shares[2]:.3f} of its")
+    # Frames by how much more squared error ours has there than mosaic+telea: where the pooled difference sits.
+    worst = sorted(scores.by_frame.items(),
+                   key=lambda item: item[1].squared_error["mosaic+telea"] - item[1].squared_error["ours"])[:5]
+    lines.append("  worst frames (t: ours / mosaic+telea dB, pixels): " + ", ".join(
+        f"{t}: {part.psnr('ours'):.1f} / {part.psnr('mosaic+telea'):.1f}, {part.pixels}" for t, part in worst))
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -57,7 +78,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--skip-real", action="store_true")
     parser.add_argument("--skip-speed", action="store_true")
     parser.add_argument("--flicker", type=Path, help="only: change of completed pixels by source on this clip")
+    parser.add_argument("--cases", default="", help="only the rows whose name holds one of these comma-separated words")
+    parser.add_argument("--split", action="store_true", help="also PSNR by filling stage, and the worst frames")
     args = parser.parse_args(argv)
+    wanted = [word for word in args.cases.split(",") if word]
+
+    def keep(name: str) -> bool:
+        return not wanted or any(word in name for word in wanted)
+
     if args.flicker is not None:
         _flicker_by_source(args.flicker)
         return 0
@@ -66,13 +94,17 @@ def main(argv: list[str] | None = None) -> int:
           + f" {'vs m+t':>8} {'vs telea':>8} {'kpx/frm':>8} {'s':>6}")
     full_synthetic = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=50))
     for image, seed in SYNTHETIC:
+        if not keep(f"synthetic {image} seed {seed}"):
+            continue
         video = generate(SyntheticConfig(n_frames=args.frames, jitter_px=10.0, object_sweep=1.3, image=image, seed=seed,
                                          blurred_frames=()))
         started = time.perf_counter()
         scores = completion_scores(video, full_synthetic)
-        print(_row(f"synthetic {image} seed {seed}", scores, time.perf_counter() - started), flush=True)
+        print(_row(f"synthetic {image} seed {seed}", scores, time.perf_counter() - started, args.split), flush=True)
     if not args.skip_real:
         for name in filter(None, args.clips.split(",")):
+            if not keep(f"crop of {name}"):
+                continue
             path = VIDEOS / name
             if not path.is_file():
                 print(f"{name:34} (absent)")
@@ -83,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
                                  seed=1)
             started = time.perf_counter()
             scores = crop_completion_scores(wide, crop, config=StabilizeConfig(mode="full"))
-            print(_row(f"crop of {name}", scores, time.perf_counter() - started), flush=True)
+            print(_row(f"crop of {name}", scores, time.perf_counter() - started, args.split), flush=True)
     if not args.skip_speed:
         _speed(args.frames)
     return 0

@@ -19,7 +19,8 @@ import pytest
 import skimage.data
 
 from pipeline.stages import completion, neighbours
-from pipeline.evaluation.completion import CompletionScores, completion_scores, crop_completion_scores, jittered_crop
+from pipeline.evaluation.completion import (METHODS, CompletionScores, completion_scores, crop_completion_scores,
+                                            jittered_crop)
 from pipeline.stages.smoothing import SmoothingConfig
 from pipeline.runtime.source import FileSource, one_pass
 from pipeline.stabilize import StabilizeConfig
@@ -60,6 +61,22 @@ def test_beats_the_opencv_cpu_chain_with_a_moving_object_crossing_the_borders():
     assert scores.pixels > 100_000
     assert scores.psnr("ours") >= scores.psnr("mosaic+telea") + 2.0, vars(scores)
     assert scores.psnr("ours") >= scores.psnr("telea") + 2.0, vars(scores)
+
+
+def test_scores_split_by_filling_stage_and_by_frame_add_up_to_the_pooled_scores():
+    config = StabilizeConfig(mode="full", smoothing=SmoothingConfig(radius_frames=50))
+    video = generate(SyntheticConfig(n_frames=16, jitter_px=10.0, object_sweep=1.3, seed=1, blurred_frames=()))
+    scores = completion_scores(video, config)
+    assert scores.pixels > 10_000
+    assert set(scores.by_source) <= {"mosaic", "local warp", "fallback"} and "mosaic" in scores.by_source
+    assert len(scores.by_frame) == scores.frames
+    for split in (scores.by_source, scores.by_frame):
+        assert sum(part.pixels for part in split.values()) == scores.pixels
+        for method in METHODS:
+            assert sum(part.squared_error[method] for part in split.values()) == pytest.approx(
+                scores.squared_error[method], rel=1e-9)
+    # The mosaic takes the pixels its neighbours agree on: its share is better than the pooled PSNR.
+    assert scores.by_source["mosaic"].psnr("ours") > scores.psnr("ours")
 
 
 def _photo(height: int = 180, width: int = 320) -> np.ndarray:

@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 from pipeline.stages import warping
+from pipeline.stages.completion import SOURCE_NAMES
 from pipeline.results import FrameResult
 from pipeline.runtime.observer import NullObserver
 from pipeline.runtime.source import ArraySource
@@ -42,11 +43,33 @@ TruthOf = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 @dataclass
 class CompletionScores:
-    """Pooled squared errors of synthesized pixels, per method."""
+    """Pooled squared errors of synthesized pixels, per method; split by what filled each pixel in our chain
+    (``by_source``, keyed by completion.SOURCE_NAMES: "mosaic", "local warp", "fallback") and by frame
+    (``by_frame``), so a loss can be traced to a stage and to the few frames that hold it. Each split sums to the
+    pooled figures."""
 
     squared_error: dict[str, float] = field(default_factory=lambda: {m: 0.0 for m in METHODS})
     pixels: int = 0
     frames: int = 0
+    by_source: dict[str, _Split] = field(default_factory=dict)
+    by_frame: dict[int, _Split] = field(default_factory=dict)
+
+    def psnr(self, method: str) -> float:
+        return _pooled_psnr(self.squared_error[method], self.pixels)
+
+    def _add(self, t: int, source: str, errors: dict[str, float], pixels: int) -> None:
+        for split in (self.by_source.setdefault(source, _Split()), self.by_frame.setdefault(t, _Split())):
+            split.pixels += pixels
+            for method, error in errors.items():
+                split.squared_error[method] += error
+
+
+@dataclass
+class _Split:
+    """Squared errors per method over one part of the synthesized pixels."""
+
+    squared_error: dict[str, float] = field(default_factory=lambda: {m: 0.0 for m in METHODS})
+    pixels: int = 0
 
     def psnr(self, method: str) -> float:
         return _pooled_psnr(self.squared_error[method], self.pixels)
@@ -84,9 +107,15 @@ class _CompletionJudge(NullObserver):
             "mosaic+telea": mosaic_telea(completed),
             "telea": cv2.inpaint(warped.frame, missing.astype(np.uint8), TELEA_RADIUS, cv2.INPAINT_TELEA),
         }
-        reference = truth[judged].astype(np.float64)
-        for method, image in candidates.items():
-            self.scores.squared_error[method] += float(np.sum((image[judged].astype(np.float64) - reference) ** 2))
+        reference = truth.astype(np.float64)
+        errors = {method: np.sum((image.astype(np.float64) - reference) ** 2, axis=2)
+                  for method, image in candidates.items()}
+        for method, error in errors.items():
+            self.scores.squared_error[method] += float(error[judged].sum())
+        for code, name in enumerate(SOURCE_NAMES):
+            part = judged & (completed.source == code)
+            if part.any():
+                self.scores._add(t, name, {m: float(e[part].sum()) for m, e in errors.items()}, int(part.sum()))
         self.scores.pixels += int(judged.sum())
         self.scores.frames += 1
 
