@@ -4,8 +4,8 @@
    missing area, where a chain of global motions has drifted by pixels on far neighbours;
 1. consistent mosaicing (eqs. 20-22, ``mosaic``): static areas, median of neighbours that agree;
 2. local-warp mosaicing: for the ``max_warp_neighbours`` nearest neighbours, local flow over the common area
-   (``local_flow``), motion inpainting of that flow into the missing area by Fast Marching (eq. 24, ``fmm``)
-   and a candidate sample through it (eq. 25); where none reaches, a covering neighbour's sample as it is;
+   (``local_flow``), its motion inpainting into the missing area by Fast Marching (eq. 24, ``fmm``), a candidate
+   through it (eq. 25); where none reaches or explains the surroundings, a covering neighbour's sample as it is;
 3. a smooth last-resort fill (``fallback``) for what no neighbour covers.
 
 Invariants: every neighbour arrives already warped into the target's stabilized coordinates, with its valid
@@ -88,6 +88,12 @@ class CompletionConfig:
     # neighbour's sample (zero local motion) whose warp best explains the surroundings, instead of the smooth
     # fallback.
     static_fill: bool = True
+    # With the static fill: where every local warp explains the surroundings worse than this (local alignment error,
+    # intensity 0..255; their flows are guesses that failed, e.g. object flow carried into a border the object has
+    # left), the best covering neighbour's sample as it is (zero local motion, as the static fill takes it) competes
+    # with them, its error counted ``static_candidate_margin`` higher. None: off.
+    static_candidate_error: float | None = 30.0
+    static_candidate_margin: float = 3.0
     mosaic: mosaic.MosaicConfig = field(default_factory=mosaic.MosaicConfig)
     flow: local_flow.LocalFlowConfig = field(default_factory=local_flow.LocalFlowConfig)
     inpaint: fmm.MotionInpaintConfig = field(default_factory=fmm.MotionInpaintConfig)
@@ -104,6 +110,8 @@ class CompletionConfig:
         if self.register_model is not None and self.register_model not in registration.MODEL_PARAMETERS:
             raise ConfigError(f"register_model must be one of {', '.join(registration.MODEL_PARAMETERS)} or None, "
                               f"not {self.register_model!r}")
+        if self.static_candidate_error is not None and not self.static_candidate_error >= 0:
+            raise ConfigError(f"static_candidate_error must be >= 0 or None, not {self.static_candidate_error}")
         if self.register_band_px < 1:
             raise ConfigError(f"register_band_px must be >= 1, not {self.register_band_px}")
         if not self.register_max_px > 0:
@@ -371,6 +379,12 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
                                              at_missing, local_error, config, target_original)
         if fills:
             # Candidates are over the ``needing`` pixels only.
+            static_from = None
+            if config.static_fill and config.static_candidate_error is not None:
+                static, static_from = _static_candidate(
+                    candidates, errors_without_motion()[:, needing], [(c[needing], v[needing]) for c, v in at_missing],
+                    config)
+                candidates.append(static)
             chosen = _best_candidate(candidates)
             take = chosen >= 0
             take &= ~checked[needing] | _moving_and_better(candidates, chosen, static_error[needing], config)
@@ -385,11 +399,16 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
             for k, fill in enumerate(fills):
                 fill.filled[py[which == k], px[which == k]] = True
                 filled_by[py[which == k], px[which == k]] = fill.offset
+            if static_from is not None:  # the last candidate: a neighbour's sample as it is
+                mine = which == len(fills)
+                filled_by[py[mine], px[mine]] = np.array([n.offset for n in neighbours], np.int16)[
+                    static_from[among[mine]]]
 
     if config.static_fill and local_error is not None and remaining.any():
         rest = np.flatnonzero(remaining[ys, xs])
-        which, ok = _best_static(errors_without_motion()[:, rest], [(c[rest], v[rest]) for c, v in at_missing],
-                                 config.confirm_difference)
+        which, rank = _best_static(errors_without_motion()[:, rest], [(c[rest], v[rest]) for c, v in at_missing],
+                                   config.confirm_difference)
+        ok = np.isfinite(rank)
         pick, which = rest[ok], which[ok]
         py, px = ys[pick], xs[pick]
         frame[py, px] = np.stack([c[pick] for c, _ in at_missing])[which, np.arange(len(pick))]
@@ -696,14 +715,35 @@ def _best_static(errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]
                  confirm_difference: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel, the neighbour whose sample (zero local motion) to take: covering the pixel, with the lowest local
     alignment error (``errors``, (neighbours, m), NaN where unmeasured); a sample no other neighbour shows ranks
-    after the confirmed ones, as in _best_candidate. Returns (index (m,), whether there is one (m,))."""
+    after the confirmed ones, as in _best_candidate. Returns (index (m,), its rank (m,): the error, + 1e4 when
+    unconfirmed, inf where no neighbour has one)."""
     ranked = np.full(errors.shape, np.inf, np.float32)
     for i, (colours, valid) in enumerate(samples):
         confirmed = _seen_by_another(colours, i, samples, confirm_difference)
         ranked[i] = np.where(valid & ~np.isnan(errors[i]),
                              errors[i] + np.where(confirmed, np.float32(0), np.float32(1e4)), np.inf)
     which = np.argmin(ranked, axis=0)
-    return which, np.isfinite(ranked[which, np.arange(ranked.shape[1])])
+    return which, ranked[which, np.arange(ranked.shape[1])]
+
+
+def _static_candidate(candidates: list[_Candidate], errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]],
+                      config: CompletionConfig) -> tuple[_Candidate, np.ndarray]:
+    """The best covering neighbour's sample as it is (``_best_static`` over all neighbours, not only the local-warp
+    ones) as one more candidate, at the pixels where no local warp explains the surroundings within
+    ``static_candidate_error``; its error counts ``static_candidate_margin`` higher, so a local warp that explains
+    them about as well keeps them. Returns the candidate and, per pixel, the index of the neighbour it comes from.
+
+    Why: a moving object's flow carried by motion inpainting into a border strip the object has already left pastes
+    a stale copy of it there, and with few local-warp neighbours reaching the strip nothing better competes; the
+    background those frames hide is often shown as it is by farther neighbours (docs/completion.md)."""
+    which, rank = _best_static(errors, samples, config.confirm_difference)
+    warped = np.min(np.stack([np.where(c.reached, c.error, np.inf) for c in candidates]), axis=0)
+    reached = np.isfinite(rank) & (warped > config.static_candidate_error)
+    colours = np.stack([c for c, _ in samples])[which, np.arange(len(which))]
+    error = np.where(reached, rank + np.float32(config.static_candidate_margin), np.inf).astype(np.float32)
+    # The confirmation is already in the rank (+1e4 when unconfirmed).
+    return (_Candidate(colours, reached, np.zeros(len(which), np.float32), error, np.ones(len(which), bool)),
+            which)
 
 
 def register_neighbours(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
