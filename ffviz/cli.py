@@ -20,7 +20,7 @@ from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (t
 from pipeline.stages import adaptive_crop, deblur, motion, smoothing
 from pipeline import presets
 from pipeline import stabilize as stab
-from pipeline.runtime import video_io
+from pipeline.runtime import memory, video_io
 from pipeline.errors import ConfigError, FFVizError
 
 _stabilize_config = stabilize_config  # the name tests/test_deblur.py uses
@@ -417,6 +417,7 @@ def _nothing_written(args: argparse.Namespace) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    memory.reuse_freed_memory()  # frame-sized arrays are reused, not faulted in afresh (pipeline/runtime/memory.py)
     try:
         return COMMANDS[args.command](args)
     except FFVizError as error:
