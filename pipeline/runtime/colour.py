@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
 import shutil
 import struct
@@ -27,6 +28,7 @@ import av
 import cv2
 import numpy as np
 from av.video.reformatter import Interpolation
+from numba import njit
 
 # FFmpeg's names (as ffprobe prints them) for the AVColorSpace / AVColorPrimaries / AVColorTransferCharacteristic /
 # AVColorRange numbers.
@@ -192,10 +194,7 @@ def to_rgb(frame: av.VideoFrame, colour: ColourDescription, width: int, height: 
     """(height, width, 3) RGB of a decoded picture by the video's matrix and range: uint8, or with ``deep`` (and
     more than 8 bits in the video) float32 on the 0..255 scale."""
     if frame.format.name in _DEPTHS and (frame.width, frame.height) == (width, height):
-        rgb = _yuv420_to_rgb(frame, colour)
-        if deep and colour.deep:
-            return rgb
-        return np.add(rgb, np.float32(0.5), out=rgb).astype(np.uint8)
+        return _yuv420_to_rgb(frame, colour, rounded=not (deep and colour.deep))
     if deep and colour.deep:
         rgb = frame.to_ndarray(format="rgb48le", width=width, height=height, src_colorspace=_SWS_MATRIX[colour.matrix],
                                src_color_range=colour.range, interpolation=_FLAGS_DEEP)
@@ -244,40 +243,96 @@ _SITE_KERNELS = {0.0: (np.array([0.25, 0.5, 0.25], np.float32), 1),  # on the fi
 def _yuv_affine(colour: ColourDescription, depth: int) -> tuple[np.ndarray, np.ndarray]:
     """3x4 float32 affine maps R'G'B' (0..255) -> Y'CbCr code values and back, by the matrix and range (ITU-T
     H.273: limited Y' = (219 E'y + 16) 2^(n-8), Cb = (224 E'pb + 128) 2^(n-8); full Y' = (2^n - 1) E'y, Cb =
-    (2^n - 1) E'pb + 2^(n-1))."""
-    kr, kb = _KR_KB.get(colour.matrix, _KR_KB[BT601])
+    (2^n - 1) E'pb + 2^(n-1)). Read-only: made once per matrix, range and depth, shared by every frame."""
+    return _affine_maps(colour.matrix, colour.range, depth)
+
+
+@functools.lru_cache(maxsize=16)
+def _affine_maps(matrix: int, colour_range: int, depth: int) -> tuple[np.ndarray, np.ndarray]:
+    kr, kb = _KR_KB.get(matrix, _KR_KB[BT601])
     kg = 1 - kr - kb
     to_ypbpr = np.array([[kr, kg, kb], [-kr / (2 * (1 - kb)), -kg / (2 * (1 - kb)), 0.5],
                          [0.5, -kg / (2 * (1 - kr)), -kb / (2 * (1 - kr))]]) / 255
     scale = 2.0 ** (depth - 8)
-    if colour.range == FULL:
+    if colour_range == FULL:
         gains, offsets = np.full(3, 2.0 ** depth - 1), np.array([0, 128, 128]) * scale
     else:
         gains, offsets = np.array([219, 224, 224]) * scale, np.array([16, 128, 128]) * scale
     encode = np.hstack([gains[:, None] * to_ypbpr, offsets[:, None]])
     to_rgb = np.linalg.inv(to_ypbpr) / gains[None, :]  # code values minus offsets -> R'G'B'
     decode = np.hstack([to_rgb, -(to_rgb @ offsets)[:, None]])
-    return encode.astype(np.float32), decode.astype(np.float32)
+    maps = encode.astype(np.float32), decode.astype(np.float32)
+    for array in maps:
+        array.flags.writeable = False
+    return maps
 
 
-def _yuv420_to_rgb(frame: av.VideoFrame, colour: ColourDescription) -> np.ndarray:
-    """RGB float32 (0..255) of a planar 4:2:0 picture, exactly by the matrix and range (swscale's 10-bit paths are
-    ~0.4% off in gain both ways, its 8-bit full range half a level off in chroma). Chroma is interpolated
-    bilinearly from where it is sited (its chroma location; unknown: left, between two rows), as from_rgb writes
-    it."""
+def _yuv420_to_rgb(frame: av.VideoFrame, colour: ColourDescription, *, rounded: bool = False) -> np.ndarray:
+    """RGB of a planar 4:2:0 picture, exactly by the matrix and range (swscale's 10-bit paths are ~0.4% off in gain
+    both ways, its 8-bit full range half a level off in chroma): float32 (0..255), or with ``rounded`` uint8 rounded
+    to the nearest level. Chroma is interpolated bilinearly from where it is sited (its chroma location; unknown:
+    left, between two rows), as from_rgb writes it.
+
+    The chroma's bilinear weights are multiples of 1/16 and the samples integers, so the interpolation is exact in
+    float32 whatever the order of its sums (``_ycbcr420``: the values cv2.warpAffine gives); the matrix is applied
+    by cv2.transform as before, and clipping and rounding take one pass (``_clip_round``)."""
     depth = _DEPTHS[frame.format.name]
     dtype = np.uint8 if depth == 8 else np.uint16
     luma, cb, cr = (np.frombuffer(p, dtype).reshape(p.height, -1)[:, :p.width] for p in frame.planes)
-    height, width = luma.shape
-    # chroma sample (i, j) sits at luma (x, y) = (2j + site_x, 2i + site_y): bilinear at ((x - site_x) / 2,
-    # (y - site_y) / 2), edges repeated
     site_x, site_y = _CHROMA_SITES.get(colour.chroma_location, _CHROMA_SITES["left"])
-    chroma = cv2.merge([cb.astype(np.float32), cr.astype(np.float32)])
-    chroma = cv2.warpAffine(chroma, np.array([[0.5, 0, -site_x / 2], [0, 0.5, -site_y / 2]]), (width, height),
-                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    ycbcr = _ycbcr420(luma, cb, cr, site_x, site_y)
     _, decode = _yuv_affine(colour, depth)
-    rgb = cv2.transform(cv2.merge([luma.astype(np.float32), chroma]), decode)
+    rgb = cv2.transform(ycbcr, decode, dst=ycbcr)
+    if rounded:
+        return _clip_round(rgb)
     return np.clip(rgb, 0, 255, out=rgb)
+
+
+@njit(cache=True, nogil=True)
+def _ycbcr420(luma: np.ndarray, cb: np.ndarray, cr: np.ndarray, site_x: float, site_y: float) -> np.ndarray:
+    """(H, W, 3) float32 Y', Cb, Cr at every luma pixel: chroma sample (i, j) sits at luma (2j + site_x, 2i +
+    site_y), read bilinearly at ((x - site_x) / 2, (y - site_y) / 2) with the edges repeated."""
+    height, width = luma.shape
+    chroma_height, chroma_width = cb.shape
+    out = np.empty((height, width, 3), np.float32)
+    left = np.empty(width, np.int64)
+    right = np.empty(width, np.int64)
+    across = np.empty(width, np.float32)
+    for x in range(width):
+        u = (x - site_x) * 0.5
+        j = math.floor(u)
+        across[x] = u - j
+        left[x] = min(max(j, 0), chroma_width - 1)
+        right[x] = min(max(j + 1, 0), chroma_width - 1)
+    one = np.float32(1.0)
+    cb_row = np.empty(chroma_width, np.float32)  # chroma interpolated down to row y, at chroma columns
+    cr_row = np.empty(chroma_width, np.float32)
+    for y in range(height):
+        v = (y - site_y) * 0.5
+        i = math.floor(v)
+        down = np.float32(v - i)
+        up = one - down
+        top, bottom = min(max(i, 0), chroma_height - 1), min(max(i + 1, 0), chroma_height - 1)
+        for j in range(chroma_width):
+            cb_row[j] = np.float32(cb[top, j]) * up + np.float32(cb[bottom, j]) * down
+            cr_row[j] = np.float32(cr[top, j]) * up + np.float32(cr[bottom, j]) * down
+        for x in range(width):
+            a, b, w = left[x], right[x], across[x]
+            out[y, x, 0] = luma[y, x]
+            out[y, x, 1] = cb_row[a] + (cb_row[b] - cb_row[a]) * w
+            out[y, x, 2] = cr_row[a] + (cr_row[b] - cr_row[a]) * w
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _clip_round(rgb: np.ndarray) -> np.ndarray:
+    """uint8 of float32 ``rgb`` clipped to 0..255 and rounded half up (np.clip, + 0.5, truncation)."""
+    flat = rgb.reshape(-1)
+    out = np.empty(flat.size, np.uint8)
+    low, high, half = np.float32(0.0), np.float32(255.0), np.float32(0.5)
+    for i in range(flat.size):
+        out[i] = np.uint8(min(max(flat[i], low), high) + half)
+    return out.reshape(rgb.shape)
 
 
 def tag_stream(context: av.codec.context.CodecContext, colour: ColourDescription) -> None:
