@@ -291,7 +291,7 @@ class StructureGuard:
         return cv2.GaussianBlur(grey, (0, 0), self.sigma) if self.sigma > 0 else grey
 
     def _box(self, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """Window means of each plane of (c, h, w) float32 ``planes`` (edges reflected)."""
+        """Window means of each image of float32 ``planes``, (c, h, w) or (c, h, w, channels) (edges reflected)."""
         out = np.empty_like(planes) if out is None else out
         for plane, mean in zip(planes, out):
             cv2.boxFilter(plane, cv2.CV_32F, self.size, dst=mean, borderType=cv2.BORDER_REFLECT)
@@ -309,7 +309,7 @@ class StructureGuard:
         other -= self.offset
         # Scratch planes kept for every neighbour of this target (fresh megabytes would cost page faults each time).
         if self._products is None:
-            self._products = np.empty((8, *other.shape), np.float32)
+            self._products = np.empty((2, *other.shape, 4), np.float32)
             self._means = np.empty_like(self._products)
         kernels.structure_products(self.target, other, np.ascontiguousarray(weight, np.float32), self._products)
         means = self._box(self._products, self._means)

@@ -460,9 +460,10 @@ def _mark_above(error: np.ndarray, row_tap0: np.ndarray, row_tap1: np.ndarray, r
     for y in range(r0, r1):
         _upsampled_rows(error, y, row_tap0, row_tap1, col_tap0, col_tap1, col_fraction, upper, lower, tags, 1)
         fy = row_fraction[y]
-        for x in range(c0, c1):
-            if upper[x] * (one - fy) + lower[x] * fy > threshold:
-                above[y, x] = 1
+        gy = one - fy
+        row = above[y]
+        for x in range(c0, c1):  # branch-free, so that it vectorises
+            row[x] |= np.uint8(upper[x] * gy + lower[x] * fy > threshold)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -592,23 +593,26 @@ class Contributions:
 
 @njit(cache=True, nogil=True)
 def structure_products(target: np.ndarray, other: np.ndarray, weight: np.ndarray, out: np.ndarray) -> None:
-    """The per-cell terms whose window means StructureGuard (pipeline/stages/deblur.py) needs, into ``out`` (8, h, w):
-    o, o^2, t o, then t times o one cell to the left, right, above and below (clamped at the edge: o(p - d) for
-    d = (0, 1), (0, -1), (1, 0), (-1, 0) in (row, column)), and the coverage weight."""
+    """The per-cell terms whose window means StructureGuard (pipeline/stages/deblur.py) needs, into ``out``
+    (2, h, w, 4), term k at out[k // 4, ..., k % 4] (two 4-channel images: OpenCV's box filter takes four channels
+    at once for the cost of about two planes, with the same sums). The terms: o, o^2, t o, then t times o one cell
+    to the left, right, above and below (clamped at the edge: o(p - d) for d = (0, 1), (0, -1), (1, 0), (-1, 0) in
+    (row, column)), and the coverage weight."""
     height, width = target.shape
     for y in range(height):
         up, down = max(y - 1, 0), min(y + 1, height - 1)
         for x in range(width):
             left, right = max(x - 1, 0), min(x + 1, width - 1)
             t, o = target[y, x], other[y, x]
-            out[0, y, x] = o
-            out[1, y, x] = o * o
-            out[2, y, x] = t * o
-            out[3, y, x] = t * other[y, left]
-            out[4, y, x] = t * other[y, right]
-            out[5, y, x] = t * other[up, x]
-            out[6, y, x] = t * other[down, x]
-            out[7, y, x] = weight[y, x]
+            first, second = out[0, y, x], out[1, y, x]
+            first[0] = o
+            first[1] = o * o
+            first[2] = t * o
+            first[3] = t * other[y, left]
+            second[0] = t * other[y, right]
+            second[1] = t * other[up, x]
+            second[2] = t * other[down, x]
+            second[3] = weight[y, x]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -628,13 +632,13 @@ def structure_refusal(means: np.ndarray, target_mean: np.ndarray, target_var: np
     two = np.float32(2.0)
     for y in range(height):
         for x in range(width):
-            mean_o = means[0, y, x]
-            var_o = max(means[1, y, x] - mean_o * mean_o, zero)
+            mean_o = means[0, y, x, 0]
+            var_o = max(means[0, y, x, 1] - mean_o * mean_o, zero)
             var_t = max(target_var[y, x], zero)
             mean_t = target_mean[y, x]
-            aligned = (two * (means[2, y, x] - mean_t * mean_o) + c) / (var_t + var_o + c)
+            aligned = (two * (means[0, y, x, 2] - mean_t * mean_o) + c) / (var_t + var_o + c)
             agreement[y, x] = aligned
-            if means[7, y, x] < full:
+            if means[1, y, x, 3] < full:
                 continue
             if aligned < minimum:
                 refused[y, x] = 1
@@ -647,9 +651,10 @@ def structure_refusal(means: np.ndarray, target_mean: np.ndarray, target_var: np
             for k in range(4):
                 yy = y - (1 if k == 2 else 0) + (1 if k == 3 else 0)
                 xx = x - (1 if k == 0 else 0) + (1 if k == 1 else 0)
-                mean_moved = means[0, yy, xx]
-                var_moved = max(means[1, yy, xx] - mean_moved * mean_moved, zero)
-                moved = (two * (means[3 + k, y, x] - mean_t * mean_moved) + c) / (var_t + var_moved + c)
+                mean_moved = means[0, yy, xx, 0]
+                var_moved = max(means[0, yy, xx, 1] - mean_moved * mean_moved, zero)
+                term = 3 + k  # t times o moved by the k-th shift (structure_products' layout)
+                moved = (two * (means[term // 4, y, x, term % 4] - mean_t * mean_moved) + c) / (var_t + var_moved + c)
                 if moved > aligned + margin:
                     refused[y, x] = 1
                     break
