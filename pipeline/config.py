@@ -41,6 +41,13 @@ class StabilizeConfig:
                               "crop-window constraint)")
 
     @property
+    def plans_by_linear_programs(self) -> bool:
+        """Whether planning the path solves linear programs (scipy.optimize): crop mode's window
+        (warping.largest_crop, and the L1 program inside it), or the l1 or tripod path anywhere."""
+        paths = {self.smoothing.path, *(segment.path for segment in self.smoothing.segments)}
+        return self.mode == "crop" or bool(paths & {"l1", "tripod"})
+
+    @property
     def completing(self) -> bool:
         """Whether missing pixels are filled (chapter 4): full mode only."""
         return self.mode == "full"

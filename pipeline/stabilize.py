@@ -244,6 +244,8 @@ def run_passes(info: video_io.VideoInfo, output_path: Path | None, config: Stabi
     reports."""
     observer.on_start(info, config)
     started = time.perf_counter()
+    if config.plans_by_linear_programs:  # scipy.optimize's import (~0.3 s) is paid while pass 1 runs, not after it
+        parallel.import_in_background("scipy.optimize", "scipy.ndimage")
     motion_result = motion_pass()
     plan = plan_path(motion_result, config, info.width, info.height)
     warnings = list(motion_result.warnings)

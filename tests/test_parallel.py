@@ -425,3 +425,29 @@ def test_cli_refuses_fewer_than_one_worker(tiny_clip, tmp_path, capfd, flag, val
     message = assert_one_line_error(result, 2, r"--workers")
     assert value in message
     assert not output.exists()
+
+
+# --- import_in_background ----------------------------------------------------------------------------------
+
+
+def test_import_in_background_loads_the_modules_and_leaves_failures_to_the_later_import():
+    import importlib
+    import sys
+
+    thread = parallel.import_in_background("json.tool", "no_such_module_for_ffviz", "never_reached_for_ffviz")
+    thread.join(timeout=30)
+    assert not thread.is_alive()
+    assert "json.tool" in sys.modules
+    assert "no_such_module_for_ffviz" not in sys.modules and "never_reached_for_ffviz" not in sys.modules
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("no_such_module_for_ffviz")
+
+
+def test_linear_programs_are_planned_in_crop_mode_and_on_the_l1_path_only():
+    from pipeline.stages.smoothing import SmoothingConfig
+
+    assert StabilizeConfig(mode="crop").plans_by_linear_programs
+    assert not StabilizeConfig(mode="none").plans_by_linear_programs  # auto is eq. 18's outside crop mode
+    assert not StabilizeConfig(mode="full").plans_by_linear_programs
+    assert StabilizeConfig(mode="none", smoothing=SmoothingConfig(path="l1")).plans_by_linear_programs
+    assert StabilizeConfig(mode="full", smoothing=SmoothingConfig(path="tripod")).plans_by_linear_programs

@@ -7,6 +7,7 @@ input order, so output and observers see exactly what a serial run gives them.
 
 from __future__ import annotations
 
+import importlib
 import os
 import queue
 import threading
@@ -113,3 +114,20 @@ class Prefetch(Iterator[T]):
         self._done = True
         self._stop.set()
         self._thread.join()
+
+
+def import_in_background(*modules: str) -> threading.Thread:
+    """Import ``modules`` on a daemon thread, so that a later import of them on the critical path finds them loaded
+    (or waits only for the rest: Python's import locks make the two imports one). An import that fails here is left
+    for the later import to raise where it is handled."""
+
+    def load() -> None:
+        for name in modules:
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 - raised again, where it matters, by the import that needs it
+                return
+
+    thread = threading.Thread(target=load, name="ffviz-import", daemon=True)
+    thread.start()
+    return thread
