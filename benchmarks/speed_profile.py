@@ -16,6 +16,7 @@ import threading
 from pathlib import Path
 
 from ffviz import bench_profile
+from pipeline.runtime import memory
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import speed_report  # noqa: E402  (benchmarks/ is not a package)
@@ -91,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.clip.is_file():
         print(f"{args.clip} not found: nothing measured")
         return 0
+    memory.reuse_freed_memory()  # as `ffviz` does at its start (pipeline/runtime/memory.py)
     started = speed_report.machine_line()
     rows = [bench_profile.profile_stages(args.clip, mode, recording=not args.no_recording).line()
             for mode in args.modes.split(",")]
