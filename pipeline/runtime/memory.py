@@ -6,10 +6,13 @@ back once it exceeds the trim threshold. Each fresh page then costs a page fault
 touch. A stabilize run makes and drops megabyte arrays (decoded frames, warps, float planes) many times a frame, from
 several threads, so with the dynamic thresholds it touches fresh pages for several times the video's decoded size:
 system time of the order of a tenth of the whole run. ``reuse_freed_memory`` fixes both thresholds so that freed
-blocks stay in the process and are reused.
+blocks stay in the process and are reused, and keeps every thread on the one main heap: a thread's own arena is made
+of heaps of at most 64 MiB that glibc unmaps as soon as they empty, so at 1080p (arrays of 6-25 MB) blocks freed
+by a worker thread were faulted in again all the same.
 
-Invariants: only where the allocation goes changes, never what is computed; the peak resident size grows by at
-most about the trim threshold per arena, whatever the video's length (freed memory is reused, not accumulated).
+Invariants: only where the allocation goes changes, never what is computed; the peak resident size stays within
+about the trim threshold of what the run holds at once, whatever the video's length (freed memory is reused, not
+accumulated).
 A process-wide setting, so it is made by the program's entry point (ffviz/cli.py), never on import.
 """
 
@@ -23,23 +26,26 @@ import sys
 # mallopt's parameter numbers (glibc's malloc.h).
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
+_M_ARENA_MAX = -8
 # Blocks up to this size come from the heaps (glibc refuses more than half its 64 MiB per-thread heap): a float32
 # RGB 1080p frame is 25 MB.
 MMAP_THRESHOLD = 32 * 1024 * 1024
 # A heap keeps up to this much free memory at its top instead of returning it: several frames' worth of arrays.
 TRIM_THRESHOLD = 128 * 1024 * 1024
+# Threads share the main heap (module docstring); its lock is taken a few hundred times a frame, far from contended.
+ARENAS = 1
 
 
 def reuse_freed_memory() -> bool:
-    """Set both glibc thresholds (the module docstring); True when they were set, False elsewhere (not Linux, not
-    glibc: nothing changes). Both at once: setting one turns off the dynamic adjustment of the other, and the
-    trim threshold alone at its 128 KiB default returns more memory than before."""
+    """Set both glibc thresholds and the one arena (the module docstring); True when they were set, False elsewhere
+    (not Linux, not glibc: nothing changes). Both thresholds at once: setting one turns off the dynamic adjustment
+    of the other, and the trim threshold alone at its 128 KiB default returns more memory than before."""
     libc = _libc()
     if libc is None:
         return False
     try:
-        return bool(libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and \
-            bool(libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+        return all([bool(libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)),
+                    bool(libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD)), bool(libc.mallopt(_M_ARENA_MAX, ARENAS))])
     except AttributeError:  # a C library without mallopt
         return False
 
