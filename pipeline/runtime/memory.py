@@ -6,9 +6,9 @@ back once it exceeds the trim threshold. Each fresh page then costs a page fault
 touch. A stabilize run makes and drops megabyte arrays (decoded frames, warps, float planes) many times a frame, from
 several threads, so with the dynamic thresholds it touches fresh pages for several times the video's decoded size:
 system time of the order of a tenth of the whole run. ``reuse_freed_memory`` fixes both thresholds so that freed
-blocks stay in the process and are reused, and keeps every thread on the one main heap: a thread's own arena is made
-of heaps of at most 64 MiB that glibc unmaps as soon as they empty, so at 1080p (arrays of 6-25 MB) blocks freed
-by a worker thread were faulted in again all the same.
+blocks stay in the process and are reused, and caps the arenas (a heap each, its own lock) at two: with one per
+thread, each kept up to the trim threshold free, and at 1080p (arrays of 6-25 MB) the peak rose above the dynamic
+thresholds' own; with one for all threads, their lock was contended (more CPU at 360p).
 
 Invariants: only where the allocation goes changes, never what is computed; the peak resident size stays within
 about the trim threshold of what the run holds at once, whatever the video's length (freed memory is reused, not
@@ -32,14 +32,15 @@ _M_ARENA_MAX = -8
 MMAP_THRESHOLD = 32 * 1024 * 1024
 # A heap keeps up to this much free memory at its top instead of returning it: several frames' worth of arrays.
 TRIM_THRESHOLD = 128 * 1024 * 1024
-# Threads share the main heap (module docstring); its lock is taken a few hundred times a frame, far from contended.
-ARENAS = 1
+# Threads share two heaps (module docstring): the frame workers, the decoder, x264 and the main thread on one each
+# would hold more memory; on a single one they wait for its lock.
+ARENAS = 2
 
 
 def reuse_freed_memory() -> bool:
-    """Set both glibc thresholds and the one arena (the module docstring); True when they were set, False elsewhere
-    (not Linux, not glibc: nothing changes). Both thresholds at once: setting one turns off the dynamic adjustment
-    of the other, and the trim threshold alone at its 128 KiB default returns more memory than before."""
+    """Set both glibc thresholds and the number of arenas (the module docstring); True when they were set, False
+    elsewhere (not Linux, not glibc: nothing changes). Both thresholds at once: setting one turns off the dynamic
+    adjustment of the other, and the trim threshold alone at its 128 KiB default returns more memory than before."""
     libc = _libc()
     if libc is None:
         return False
