@@ -83,6 +83,16 @@ def _photo(height: int = 180, width: int = 320) -> np.ndarray:
     return np.ascontiguousarray(skimage.data.astronaut()[100:100 + height, 60:60 + width])
 
 
+def _photo_missing_right(strip_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(truth, missing, target): _photo() with its rightmost ``strip_px`` columns missing (0 in the target)."""
+    truth = _photo()
+    missing = np.zeros(truth.shape[:2], bool)
+    missing[:, -strip_px:] = True
+    target = truth.copy()
+    target[missing] = 0
+    return truth, missing, target
+
+
 def _neighbours(frames: dict[int, np.ndarray], valid: dict[int, np.ndarray] | None = None,
                 ) -> list[neighbours.WarpedNeighbour]:
     """Neighbours already in the target's coordinates (identity global motion)."""
@@ -137,12 +147,8 @@ def _disc_scene(offset: int, background: np.ndarray, speed: float = 5.0) -> tupl
 def test_an_object_that_passed_through_the_border_in_one_neighbour_is_not_pasted_where_farther_ones_show_the_scene():
     """The nearest neighbours do not reach the lower part of a border strip; the one that does (t+2) shows an object
     passing there, over the strip and the band beside it, that frame t does not show; t-3 and t-4 show the scene."""
-    truth = _photo()
+    truth, missing, target = _photo_missing_right(30)
     height, width = truth.shape[:2]
-    missing = np.zeros((height, width), bool)
-    missing[:, -30:] = True
-    target = truth.copy()
-    target[missing] = 0
     lower = missing.copy()
     lower[:90] = False
     rng = np.random.default_rng(3)
@@ -309,12 +315,8 @@ def test_registration_recovers_each_neighbours_error_over_the_missing_area():
 def test_a_border_only_far_neighbours_see_takes_their_best_sample_not_the_smooth_fallback():
     """Where the mosaic refuses (the two neighbours that see the strip disagree) and no local warp reaches (the
     nearest frames do not see it), the covering neighbour whose warp continues the surroundings fills it."""
-    truth = _photo()
+    truth, missing, target = _photo_missing_right(20)
     height, width = truth.shape[:2]
-    missing = np.zeros((height, width), bool)
-    missing[:, -20:] = True
-    target = truth.copy()
-    target[missing] = 0
     occluded = truth.copy()
     occluded[:, -60:] = 255 - np.flip(truth[:, -60:], axis=(0, 1))  # something passes in front of +5's right side
     seen_by_far = np.ones((height, width), bool)
