@@ -55,6 +55,8 @@ FILLED_BY_BASE = 100  # filled_by class of a local-warp pixel: FILLED_BY_BASE + 
 H264_OPTIONS = {"preset": "superfast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
 KEYFRAME_INTERVAL = 30
 FRAME_SIZE_FIELD = "frame_size"  # (width, height) of a frame stream whose size is odd (ffviz.rrd crops to it)
+# deblur/source's class 1, in its legend and its colour key alike
+DEBLUR_REFUSED_NAME = "own: every sharper one refused (other content)"
 WEIGHTS_STEP = 8  # deblur/weights in the compact recording: multiples of 8/255 (--lossless: of 1/255)
 QUEUE_EVENTS = 48  # stage results waiting for the recorder's thread (~6 frames' worth): bounds the memory held
 _STOP = object()
@@ -432,7 +434,8 @@ class RerunRecorder:
         self._colour = ColourDescription()  # the input's (on_start): frames are shown as display RGB by it
         self._config: Any = None
         self._crop: Any = None
-        self._planned: str | None = None  # the path setting the plan followed (crop mode's auto: the one it chose)
+        # (planner, setting label) of the path the plan followed (crop mode's auto: the one it chose)
+        self._planned: tuple[str, str] | None = None
         self._adaptive: AdaptiveCrop | None = None
         self._warnings = 0
         self._log_lines = 0  # lines logged to ent.LOG (warnings and notes): the about tab's table only when any
@@ -574,7 +577,7 @@ class RerunRecorder:
                                                           (1, _offset_colour(1)), (10, _offset_colour(10)))],
                 "filled by (neighbours: blue = earlier, orange = later)"),
             "deblur_source": visual.palette_key(
-                [("own: every sharper one refused (other content)", (230, 40, 60, 200))]
+                [(DEBLUR_REFUSED_NAME, (230, 40, 60, 200))]
                 + [(f"from neighbour {o:+d}", c) for o, c in ((-5, _offset_colour(-5)), (5, _offset_colour(5)))],
                 "pixel from (blue: earlier, orange: later)"),
         }
@@ -689,7 +692,8 @@ class RerunRecorder:
             self.rec.send_columns(entity, indexes=indexes, columns=rr.Scalars.columns(scalars=np.array(skew)[:, column]))
 
     def _on_path(self, plan: PathPlan) -> None:
-        self._planned = plan.smoothing.settings[0] if plan.smoothing.settings else None
+        if plan.smoothing.settings:
+            self._planned = (plan.smoothing.planner, plan.smoothing.settings[0])
         self._on_smoothing(plan.smoothing)
         if plan.paths is not None:
             self._on_paths(plan.paths())
@@ -1034,7 +1038,7 @@ class RerunRecorder:
     @staticmethod
     @functools.cache
     def _deblur_source_legend(max_offset: int = 30) -> tuple:
-        legend = [(0, "own frame", (0, 0, 0, 0)), (1, "own: every sharper neighbour refused", (230, 40, 60, 200))]
+        legend = [(0, "own frame", (0, 0, 0, 0)), (1, DEBLUR_REFUSED_NAME, (230, 40, 60, 200))]
         for offset in range(-max_offset, max_offset + 1):
             if offset:
                 legend.append((FILLED_BY_BASE + offset, f"from neighbour {offset:+d}", _offset_colour(offset, 170)))
@@ -1050,7 +1054,7 @@ class RerunRecorder:
     @staticmethod
     def _meta_markdown(info: Any, config: Any, *, report: Any = None, crop: Any = None, warnings: int = 0,
                        level: str = "full", lossless: bool = False, seconds_logging: float = 0.0,
-                       planned: str | None = None) -> str:
+                       planned: tuple[str, str] | None = None) -> str:
         lines = ["# About this recording", "",
                  f"- ffviz {ffviz.__version__}, rerun-sdk {rr.__version__} (open it with the same rerun version)"]
         if info is not None:
@@ -1068,8 +1072,9 @@ class RerunRecorder:
         if config is not None:
             lines += ["", "## Settings", ""] + [f"- {row}" for row in _settings_summary(config)]
             if planned is not None and getattr(getattr(config, "smoothing", None), "path", None) == "auto":
-                chose = "the L1 program in the crop window" if planned.startswith("l1") else "eq. 18's path"
-                lines.append(f"- auto chose: {chose} (`{planned}`)")
+                planner, label = planned
+                chose = "the L1 program in the crop window" if planner == "l1" else "eq. 18's path"
+                lines.append(f"- auto chose: {chose} (`{label}`)")
         if crop is not None and hasattr(crop, "scales"):  # --crop adaptive
             lines.append(f"- adaptive crop: scale {crop.scales.min():.3f}-{crop.scales.max():.3f} about "
                          f"({crop.anchor[0]:.1f}, {crop.anchor[1]:.1f}), {crop.cropping_ratio:.1%} of the area kept "

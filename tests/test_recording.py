@@ -648,11 +648,12 @@ def test_about_tab_names_the_settings_that_differ_from_the_defaults():
     assert "`smoothing.radius_frames = 12`" in settings and "`deblur.enabled = False`" in settings
     assert "`mode = 'crop'`" in settings and "motion." not in settings
     # Crop mode's auto path: the tab says which path it planned (the recorder has it from the plan).
-    auto = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"), planned="l1")
+    auto = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"), planned=("l1", "l1"))
     assert "- auto chose: the L1 program in the crop window (`l1`)" in auto
-    fallback = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"), planned="gaussian:k=30")
+    eq18 = ("gaussian", "gaussian:k=30")
+    fallback = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"), planned=eq18)
     assert "- auto chose: eq. 18's path (`gaussian:k=30`)" in fallback
-    assert "auto chose" not in RerunRecorder._meta_markdown(None, StabilizeConfig(), planned="gaussian:k=30")
+    assert "auto chose" not in RerunRecorder._meta_markdown(None, StabilizeConfig(), planned=eq18)
 
 
 def test_live_view_and_file_at_once(clip, tmp_path):
