@@ -93,8 +93,7 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
         try:
             png = _drive(ViewerClient, port, viewer, frame, time.monotonic() + timeout_s)
         except Exception as error:  # noqa: BLE001 - the viewer's own account first, where it stopped
-            stopped = viewer.poll() is not None or _wait_stopped(viewer)
-            if stopped:
+            if _wait_stopped(viewer):
                 raise InputError(viewer_stopped(viewer.returncode, log.read_text(errors="replace"))) from None
             raise error
         finally:
@@ -111,6 +110,7 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
 
 
 def _wait_stopped(viewer: subprocess.Popen, seconds: float = 2.0) -> bool:
+    """Whether the viewer has exited, or does within ``seconds`` (a connection error can come first)."""
     try:
         viewer.wait(seconds)
     except subprocess.TimeoutExpired:
