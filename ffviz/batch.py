@@ -9,6 +9,7 @@ Ray is an optional extra (`pip install ffviz[ray]`): it is imported only here, o
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import sys
@@ -17,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-from pipeline.runtime import segments, video_io
+from pipeline.runtime import memory, segments, video_io
 from pipeline import stabilize as stab
 from pipeline.errors import ConfigError, FFVizError, InputError
 from pipeline.results import FrameResult
@@ -181,6 +182,19 @@ def connect(address: str | None, jobs: int | None) -> None:
         raise ConfigError(f"cannot start or reach Ray{f' at {address}' if address else ''}: {error}") from None
 
 
+def _in_worker(fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)`` in a Ray worker, after the allocator settings ffviz's entry point makes for its own process
+    (pipeline/runtime/memory.py): Ray starts its workers itself, so without them every frame-sized array a task
+    makes is faulted in afresh. Setting them again in a worker that has them changes nothing."""
+    memory.reuse_freed_memory()
+    return fn(*args)
+
+
+def _task(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """A call that submits ``fn(*args)`` as a one-CPU Ray task run through _in_worker; returns its object ref."""
+    return functools.partial(_ray().remote(num_cpus=1)(_in_worker).remote, fn)
+
+
 def _slots(jobs: int | None) -> int:
     return jobs or max(1, int(_ray().cluster_resources().get("CPU", 1)))
 
@@ -190,7 +204,7 @@ def ray_mapper(jobs: int | None) -> segments.Mapper:
     ray = _ray()
 
     def mapper(fn: Callable[..., Any], arg_list: Sequence[tuple]) -> Iterator[Any]:
-        remote = ray.remote(num_cpus=1)(fn)
+        submit = _task(fn)
         # Arguments shared by every job (the whole path, the config) go to the object store once.
         shared: dict[int, Any] = {}
 
@@ -209,7 +223,7 @@ def ray_mapper(jobs: int | None) -> segments.Mapper:
                 args = next(queue, None)
                 if args is None:
                     break
-                pending.append(remote.remote(*map(put, args)))
+                pending.append(submit(*map(put, args)))
             if not pending:
                 return
             yield ray.get(pending.pop(0))
@@ -238,7 +252,7 @@ def run_batch(jobs_list: Sequence[VideoJob], *, jobs: int | None = None, segment
             if on_result:
                 on_result(results[i])
         return [results[i] for i in range(len(jobs_list))]
-    remote = ray.remote(num_cpus=1)(stabilize_one)
+    submit = _task(stabilize_one)
     slots = _slots(jobs)
     queue = iter(todo)
     running: dict[Any, int] = {}
@@ -247,7 +261,7 @@ def run_batch(jobs_list: Sequence[VideoJob], *, jobs: int | None = None, segment
             i = next(queue, None)
             if i is None:
                 break
-            running[remote.remote(jobs_list[i])] = i
+            running[submit(jobs_list[i])] = i
         if not running:
             break
         [ref], _ = ray.wait(list(running), num_returns=1)

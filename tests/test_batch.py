@@ -130,3 +130,29 @@ def test_segmented_output_keeps_the_audio_and_the_timing(tmp_path):
     assert result.fps == source.fps and (result.width, result.height) == (source.width, source.height)
     codec, seconds = audio_seconds(out)
     assert codec == "aac" and abs(seconds - audio_seconds(clip)[1]) < 0.05
+
+
+def test_ray_workers_reuse_freed_memory_as_the_cli_does(local_ray):
+    """A Ray worker is a process Ray starts, not ffviz's entry point: the allocator settings
+    (pipeline/runtime/memory.py) must be made in it too, or each frame-sized array is faulted in afresh."""
+    from pipeline.runtime import memory
+
+    if memory._libc() is None:
+        pytest.skip("glibc's mallopt only")
+
+    def churn() -> int:  # tests/test_memory.py's measure, in the worker
+        import resource
+
+        for _ in range(2):
+            frames = [np.ones((720, 1280, 3), np.float32) for _ in range(4)]
+            del frames
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        for i in range(10):
+            frames = [np.full((720, 1280, 3), i, np.float32) for _ in range(4)]
+            del frames
+        return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+    pages_a_frame = 720 * 1280 * 3 * 4 // 4096
+    faults = list(batch.ray_mapper(2)(churn, [() for _ in range(4)]))
+    assert len(faults) == 4
+    assert max(faults) < 2 * pages_a_frame
