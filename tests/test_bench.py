@@ -61,7 +61,7 @@ def test_writes_a_dated_report_with_the_machine(bench_run):
     for key in ("| cpu |", "| cores |", "| python |", "| numpy |", "| rerun-sdk |", "| opencv-python-headless |"):
         assert key in report
     assert "Clips: tiny.mp4." in report and "| tiny.mp4 | ffviz crop |" in report
-    assert "targets (from this table" in report and "![speed against steadiness" in report
+    assert "speed targets read off this table" in report and "![speed against steadiness" in report
     assert (out / "report" / "benchmarks.png").read_bytes().startswith(b"\x89PNG")
     assert json.loads((out / "bench.json").read_text())["machine"]["cores"] == str(os.cpu_count())
 
@@ -192,31 +192,40 @@ def test_stream_frames_renders_a_shaky_clip_lazily():
         next(synthetic.stream_frames(synthetic.SyntheticConfig(n_frames=5)))
 
 
-def test_targets_compare_ffviz_with_its_peers_and_the_1080p_goal():
+def test_targets_compare_wall_and_cpu_with_the_peers_against_each_bound():
     from ffviz.bench import BenchRow
-    from ffviz.bench_report import targets
+    from ffviz.bench_report import X264_ONLY, targets
 
-    def row(clip, method, size, seconds=None):
-        return BenchRow(clip, method, *size, 60, seconds_runs=[] if seconds is None else [seconds])
+    def row(clip, method, size, seconds=None, cpu=None):
+        return BenchRow(clip, method, *size, 60, seconds_runs=[] if seconds is None else [seconds],
+                        cpu_seconds_runs=[] if cpu is None else [cpu])
 
-    rows = [row("a.mp4", "input", (640, 360)), row("a.mp4", "ffviz full", (640, 360), 30.0),
-            row("a.mp4", "opencv", (640, 360), 10.0), row("a.mp4", "ffviz none", (640, 360), 6.0),
-            row("a.mp4", "vidstab", (640, 360), 3.0),
-            row("hd.mp4", "input", (1920, 1080)), row("hd.mp4", "ffviz full", (1920, 1080), 15.0)]
+    rows = [row("a.mp4", "input", (640, 360)), row("a.mp4", "ffviz full", (640, 360), 9.0, 24.0),
+            row("a.mp4", "opencv", (640, 360), 10.0, 20.0), row("a.mp4", "ffviz none", (640, 360), 6.0, 9.0),
+            row("a.mp4", "vidstab", (640, 360), 3.0, 4.0),
+            row("hd.mp4", "input", (1920, 1080)), row("hd.mp4", "ffviz full", (1920, 1080), 15.0, 19.0),
+            row("hd.mp4", X264_ONLY, (1920, 1080), 5.0, 10.0)]
     text = "\n".join(targets(rows))
-    assert "ffviz full 2.00 fps vs opencv 6.00 fps = 0.33x" in text
-    assert "ffviz none 10.00 fps vs vidstab 20.00 fps = 0.50x" in text
-    assert "ffviz crop vs vidstab: n/a (ffviz crop not measured)" in text
-    assert "ffviz full mpeg4 vs opencv: n/a (ffviz full mpeg4 not measured)" in text
-    same_codec = "\n".join(targets(rows + [row("a.mp4", "ffviz full mpeg4", (640, 360), 5.0)]))
-    assert "ffviz full mpeg4 12.00 fps vs opencv 6.00 fps = 2.00x" in same_codec
-    assert "hd.mp4: ffviz full 4.00 fps vs the 3 fps target: met" in text
-    slow = "\n".join(targets(rows[:-1] + [row("hd.mp4", "ffviz full", (1920, 1080), 30.0)]))
-    assert "hd.mp4: ffviz full 2.00 fps vs the 3 fps target: not met" in slow
+    assert "a.mp4: ffviz none 6.00 / 9.00 s vs vidstab 3.00 / 4.00 s: wall 2.00x, CPU 2.25x (not met)" in text
+    assert "a.mp4: ffviz crop vs vidstab: n/a (ffviz crop not measured)" in text
+    # Target 2 needs both: the wall is under the sample's, the CPU 1.2x its (<= 1.3x).
+    assert "a.mp4: ffviz full 9.00 / 24.00 s vs opencv 10.00 / 20.00 s: wall 0.90x, CPU 1.20x (met)" in text
+    costly = "\n".join(targets([r if r.method != "ffviz full" or r.clip != "a.mp4" else
+                                row("a.mp4", "ffviz full", (640, 360), 9.0, 27.0) for r in rows]))
+    assert "wall 0.90x, CPU 1.35x (not met)" in costly
+    assert "ffviz full mpeg4" not in text  # the optional same-codec row, absent
+    same_codec = "\n".join(targets(rows + [row("a.mp4", "ffviz full mpeg4", (640, 360), 5.0, 12.0)]))
+    assert "a.mp4: ffviz full mpeg4 5.00 / 12.00 s vs opencv 10.00 / 20.00 s: wall 0.50x, CPU 0.60x\n" in same_codec + "\n"
+    # Target 4 on CPU only (a ratio of CPU a frame: the same frames on both sides).
+    assert "hd.mp4: ffviz full 15.00 / 19.00 s vs x264 only 5.00 / 10.00 s: wall 3.00x, CPU 1.90x (met)" in text
+    slow = "\n".join(targets(rows[:-2] + [row("hd.mp4", "ffviz full", (1920, 1080), 15.0, 21.0), rows[-1]]))
+    assert "CPU 2.10x (not met)" in slow
     assert any("no clip of 1080+ rows" in line for line in targets(rows[:5]))
-    assert not any("encoder floor" in line for line in targets(rows))  # no x264-only row: no floor block
-    floor = "\n".join(targets(rows + [row("a.mp4", "x264 only", (640, 360), 1.5)]))
-    assert "a.mp4: x264 only 1.50 s = 50 % of vidstab's, 25 % of ffviz none's, 5 % of ffviz full's" in floor
+    assert "hd.mp4: ffviz full vs x264 only: n/a (x264 only not measured)" in "\n".join(targets(rows[:-1]))
+    assert any("3. --quality fast" in line for line in targets(rows))
+    floor = "\n".join(targets(rows))
+    assert "hd.mp4: x264 only 5.00 s = 33 % of ffviz full's" in floor
+    assert not any("encoder floor" in line for line in targets(rows[:5]))  # no x264-only row: no floor block
 
 
 def test_machine_ticks_read_steal_from_proc_stat(tmp_path):
