@@ -495,7 +495,8 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     points_y = np.concatenate([ys[needing], local_error.band_y])
     points_x = np.concatenate([xs[needing], local_error.band_x])
     m = len(needing)
-    at_needing = [(colours[needing], valid[needing]) for colours, valid in at_missing]
+    shown = _intensities([(colours[needing], valid[needing]) for colours, valid in at_missing],
+                         config.confirm_difference)
     fills: list[NeighbourFill] = []
     candidates: list[_Candidate] = []
     for i in order:
@@ -512,7 +513,7 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
         # A warp whose surroundings cannot be checked ranks after every checked one.
         error = np.nan_to_num(local_error(colours[m:], landed[m:])[needing], nan=255.0)
         sample, moving = colours[:m], motion[:m] > config.moving_px
-        confirmed = moving | _seen_by_another(sample, i, at_needing, config.confirm_difference)
+        confirmed = moving | _seen_by_another(sample, i, shown, config.confirm_difference)
         candidates.append(_Candidate(sample, landed[:m], motion[:m], error, confirmed))
         fill.reached = np.zeros((height, width), bool)
         fill.reached[ys[needing], xs[needing]] = landed[:m]
@@ -687,16 +688,26 @@ def _dilate(mask: np.ndarray, *radii: int) -> list[np.ndarray]:
     return out
 
 
-def _seen_by_another(sample: np.ndarray, source: int, at_missing: list[tuple[np.ndarray, np.ndarray]],
-                     threshold: float | None) -> np.ndarray:
-    """Whether some other neighbour shows (as it is, no local motion) the sample's intensity at each pixel."""
-    if threshold is None:
+def _intensities(samples: list[tuple[np.ndarray, np.ndarray]], threshold: float | None
+                 ) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """(intensity, valid) of each neighbour's samples, for ``_seen_by_another``: made once for all the neighbours'
+    tests (each compares with every other); None when the test is off (``threshold`` None)."""
+    return None if threshold is None else [(imaging.intensity(colours), valid) for colours, valid in samples]
+
+
+def _seen_by_another(sample: np.ndarray, source: int, shown: list[tuple[np.ndarray, np.ndarray]] | None,
+                     threshold: float | None, value: np.ndarray | None = None) -> np.ndarray:
+    """Whether some other neighbour than ``source`` shows (as it is, no local motion) the sample's intensity at each
+    pixel; ``shown``: every neighbour's (intensity, valid) there (``_intensities``), ``value``: the sample's
+    intensity when at hand (else taken here)."""
+    if threshold is None or shown is None:
         return np.ones(len(sample), bool)
-    value = imaging.intensity(sample)
+    if value is None:
+        value = imaging.intensity(sample)
     seen = np.zeros(len(sample), bool)
-    for n, (colours, valid) in enumerate(at_missing):
+    for n, (intensity, valid) in enumerate(shown):
         if n != source:
-            seen |= valid & (np.abs(imaging.intensity(colours) - value) < threshold)
+            seen |= valid & (np.abs(intensity - value) < threshold)
     return seen
 
 
@@ -718,8 +729,10 @@ def _best_static(errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]
     after the confirmed ones, as in _best_candidate. Returns (index (m,), its rank (m,): the error, + 1e4 when
     unconfirmed, inf where no neighbour has one)."""
     ranked = np.full(errors.shape, np.inf, np.float32)
+    shown = _intensities(samples, confirm_difference)
     for i, (colours, valid) in enumerate(samples):
-        confirmed = _seen_by_another(colours, i, samples, confirm_difference)
+        confirmed = _seen_by_another(colours, i, shown, confirm_difference,
+                                     value=None if shown is None else shown[i][0])
         ranked[i] = np.where(valid & ~np.isnan(errors[i]),
                              errors[i] + np.where(confirmed, np.float32(0), np.float32(1e4)), np.inf)
     which = np.argmin(ranked, axis=0)
