@@ -18,6 +18,7 @@ from typing import Callable, Mapping
 
 import cv2
 import numpy as np
+from numba import njit
 
 from pipeline import geometry
 from pipeline.stages import warping
@@ -51,6 +52,32 @@ def remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray,
 
     sampled = cv2.remap(image, as_map(x), as_map(y), cv2.INTER_LINEAR, borderMode=border_mode)
     return sampled.reshape(-1, channels)[:count]
+
+
+@njit(cache=True, nogil=True)
+def _source_points(m: np.ndarray, x: np.ndarray, y: np.ndarray, width: int, height: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (x, y) (float32) mapped by the 3x3 ``m`` into a width x height source: (x, y) float32 there,
+    computed in float64 and rounded once (w is exactly 1 for an affine m, so it is not divided by), and whether
+    every bilinear tap lies inside (within TAP_SLACK). One pass over the points instead of numpy's temporaries."""
+    n = len(x)
+    src_x = np.empty(n, np.float32)
+    src_y = np.empty(n, np.float32)
+    valid = np.empty(n, np.bool_)
+    projective = m[2, 0] != 0.0 or m[2, 1] != 0.0 or m[2, 2] != 1.0
+    for i in range(n):
+        px, py = np.float64(x[i]), np.float64(y[i])
+        u = m[0, 0] * px + m[0, 1] * py + m[0, 2]
+        v = m[1, 0] * px + m[1, 1] * py + m[1, 2]
+        if projective:
+            w = m[2, 0] * px + m[2, 1] * py + m[2, 2]
+            u /= w
+            v /= w
+        su, sv = np.float32(u), np.float32(v)
+        src_x[i], src_y[i] = su, sv
+        valid[i] = (su > -TAP_SLACK and su < width - 1 + TAP_SLACK
+                    and sv > -TAP_SLACK and sv < height - 1 + TAP_SLACK)
+    return src_x, src_y, valid
 
 
 class WarpedNeighbour:
@@ -145,18 +172,9 @@ class WarpedNeighbour:
             colours = remap_points(self._rgb, x, y)
             valid = remap_points(self._valid.astype(np.uint8) * 255, x, y)[:, 0] == 255
         else:
-            m = self.other_from_stab
-            src_x = m[0, 0] * x + m[0, 1] * y + m[0, 2]
-            src_y = m[1, 0] * x + m[1, 1] * y + m[1, 2]
-            if m[2, 0] != 0.0 or m[2, 1] != 0.0 or m[2, 2] != 1.0:  # projective (w is exactly 1 for affine)
-                w = m[2, 0] * x + m[2, 1] * y + m[2, 2]
-                src_x /= w
-                src_y /= w
-            src_x, src_y = src_x.astype(np.float32), src_y.astype(np.float32)
-            colours = remap_points(self.original, src_x, src_y)
             height, width = self.original.shape[:2]
-            valid = ((src_x > -TAP_SLACK) & (src_x < width - 1 + TAP_SLACK)
-                     & (src_y > -TAP_SLACK) & (src_y < height - 1 + TAP_SLACK))
+            src_x, src_y, valid = _source_points(self.other_from_stab, x, y, width, height)
+            colours = remap_points(self.original, src_x, src_y)
         warping.blacken(colours, ~valid)
         return colours.reshape(shape + (3,)), valid.reshape(shape)
 
