@@ -182,11 +182,6 @@ class NeighbourFill:
         return out
 
 
-def _inside(box: tuple[slice, slice], ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    rows, cols = box
-    return (ys >= rows.start) & (ys < rows.stop) & (xs >= cols.start) & (xs < cols.stop)
-
-
 def _claims(pieces: Sequence[FlowPiece]) -> list[tuple[int, tuple[slice, slice]]]:
     """(piece index, rectangle) in the order they claim pixels, a later claim winning: every box, then each
     piece's owned rectangles. So a pixel takes the flow of the piece owning it, else of the last box holding
@@ -197,9 +192,21 @@ def _claims(pieces: Sequence[FlowPiece]) -> list[tuple[int, tuple[slice, slice]]
 
 def _owners(pieces: Sequence[FlowPiece], ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
     """Per pixel, the index of the piece whose flow it takes (``_claims``); -1: none."""
+    claims = _claims(pieces)
+    rects = np.array([(rows.start, rows.stop, cols.start, cols.stop) for _, (rows, cols) in claims],
+                     np.int64).reshape(-1, 4)
+    return _last_claim(np.array([k for k, _ in claims], np.int64), rects, np.asarray(ys), np.asarray(xs))
+
+
+@njit(cache=True, nogil=True)
+def _last_claim(piece: np.ndarray, rects: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """Per pixel, ``piece`` of the last rectangle (y0, y1, x0, x1; half-open) holding it; -1: none."""
     owner = np.full(len(ys), -1, np.int64)
-    for k, rect in _claims(pieces):
-        owner[_inside(rect, ys, xs)] = k
+    for i in range(len(ys)):
+        for c in range(len(rects) - 1, -1, -1):
+            if rects[c, 0] <= ys[i] < rects[c, 1] and rects[c, 2] <= xs[i] < rects[c, 3]:
+                owner[i] = piece[c]
+                break
     return owner
 
 
