@@ -176,6 +176,8 @@ def _rescue_large_motions(flow: np.ndarray, target: np.ndarray, neighbour: np.nd
     box_target, box_flow = target[y0:y1, x0:x1], flow[y0:y1, x0:x1]
     error = _warp_error(box_target, neighbour, box_flow, (y0, x0))
     bad = where[y0:y1, x0:x1] & (error > config.rescue_error)
+    if not bad.any():
+        return
     count, labels, stats, _ = cv2.connectedComponentsWithStats(bad.astype(np.uint8), connectivity=8)
     search = config.rescue_search_px
     for label in range(1, count):
