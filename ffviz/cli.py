@@ -205,9 +205,9 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                    help="camera path planner: gaussian (eq. 18, with -k); l1 (L1-optimal path of still, "
                         "constant-velocity and constant-acceleration pieces, each frame within 3%% of the frame's "
                         "longer side, 2 degrees and 4%% zoom of its input, or in crop mode inside the crop window); "
-                        "tripod (see --tripod); auto (crop mode: l1 in the widest window where it is as steady as "
-                        "gaussian, else gaussian; other modes: gaussian) (default: auto in crop mode, gaussian "
-                        "otherwise)")
+                        "tripod (see --tripod); auto (crop mode: l1 that also prices the path's shake over half a second, in "
+                        "the widest window where it is as steady as gaussian, else gaussian; other modes: gaussian) "
+                        "(default: auto in crop mode, gaussian otherwise)")
     p.add_argument("--tripod", action="store_true",
                    help="hold the camera still (same as --path tripod): the output does not move while a still "
                         "view stays within 10%% of the frame, 4 degrees and 8%% zoom of every input frame; where the "

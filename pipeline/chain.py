@@ -29,9 +29,16 @@ import numpy as np
 
 SINGLE_FRAME_WARNING = "only one frame: there is no motion to smooth, written as it is"
 NO_CROP_WARNING = "no area is common to all stabilized frames: crop disabled, borders left black"
-# Crop mode's L1 window without --crop-scale is first tried at the one eq. 18's path at this radius keeps: the room
-# the shake within about half a second needs (about what vid.stab's defaults keep: docs/benchmarks-l1-vs-vidstab.md).
-SHAKE_RADIUS_FRAMES = 15
+# Crop mode's L1 window without --crop-scale is first tried at the one eq. 18's path at this radius keeps. --path l1:
+# the room the shake within about half a second needs (about what vid.stab's defaults keep:
+# docs/benchmarks-l1-vs-vidstab.md). --path auto (crop mode's default) also prices the path's shake
+# (l1_path.L1PathConfig.shake_weight) at AUTO_SHAKE_WEIGHT, five times Grundmann et al.'s weight of jerk, and so
+# needs less room: the room of a third of a second. On six of the seven shared clips its path in that wider window
+# is steadier than the L1 path without the term in the window of radius 15; on vplab_C 1.02x as shaky, keeping 0.014
+# more of the frame (docs/decisions.md, 2026-11-26).
+L1_WINDOW_RADIUS_FRAMES = 15
+AUTO_WINDOW_RADIUS_FRAMES = 10
+AUTO_SHAKE_WEIGHT = 500.0
 
 
 def plan_path(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int) -> PathPlan:
@@ -123,13 +130,17 @@ def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, he
 def _l1_in_crop_window(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: int,
                        free: smoothing.SmoothingResult) -> smoothing.SmoothingResult:
     """The L1 program with Grundmann et al.'s crop-window constraint: a window stays inside every input frame and
-    within it the path is as smooth as the program can make it. The window: the centred one of --crop-scale, or
+    within it the path is as smooth as the program can make it (for auto, with the shake priced at
+    AUTO_SHAKE_WEIGHT over the jitter measure's half second). The window: the centred one of --crop-scale, or
     the widest that leaves the path at least as steady as eq. 18's at the run's radius (by ``_shake_px``), tried
-    from the window eq. 18's path at SHAKE_RADIUS_FRAMES keeps (the room the shake within about half a second
-    needs) to eq. 18's own. Where none does, the l1 path takes eq. 18's window and the auto path is eq. 18's.
+    from the window eq. 18's path at L1_WINDOW_RADIUS_FRAMES (auto: AUTO_WINDOW_RADIUS_FRAMES) keeps to eq. 18's
+    own. Where none does, the l1 path takes eq. 18's window and the auto path is eq. 18's.
     ``free``: the run's path without the window (eq. 18's for auto; returned if no window fits)."""
     auto = config.smoothing.path == "auto"
     l1_config = dataclasses.replace(config.smoothing, path="l1") if auto else config.smoothing
+    if auto:  # the shake over the jitter measure's half second, in frames
+        l1_config = dataclasses.replace(l1_config, l1=dataclasses.replace(
+            l1_config.l1, shake_weight=AUTO_SHAKE_WEIGHT, shake_sigma_frames=_fps(motion_pass.times_s) / 2.0))
 
     def solve(window: tuple[float, tuple[float, float]], zoom_in: float = 0.0) -> smoothing.SmoothingResult:
         l1 = dataclasses.replace(l1_config.l1, crop_scale=window[0], crop_offset=window[1], crop_zoom_in=zoom_in)
@@ -140,7 +151,8 @@ def _l1_in_crop_window(motion_pass: MotionPass, config: StabilizeConfig, width: 
         return solve((config.crop.scale, (0.0, 0.0)))
     windows, reference = [], None  # (scale, offset, how far eq. 18's path zooms in)
     run_radius = config.smoothing.radius_frames
-    for radius in dict.fromkeys((SHAKE_RADIUS_FRAMES, (SHAKE_RADIUS_FRAMES + run_radius) // 2, run_radius)):
+    first = AUTO_WINDOW_RADIUS_FRAMES if auto else L1_WINDOW_RADIUS_FRAMES
+    for radius in dict.fromkeys((first, (first + run_radius) // 2, run_radius)):
         eq18 = smoothing.smooth(motion_pass.curr_from_prev, dataclasses.replace(
             config.smoothing, path="gaussian", radius_frames=radius, sigma=None, smoothness=None, segments=()),
             cuts=motion_pass.cuts, width=width, height=height)
@@ -170,10 +182,14 @@ def _shake_px(trajectory: np.ndarray, times_s: list[float]) -> float:
     (the high-pass pipeline.evaluation.metrics' residual jitter takes of a video's motion)."""
     from scipy.ndimage import gaussian_filter1d
 
-    fps = (len(times_s) - 1) / (times_s[-1] - times_s[0]) if len(times_s) > 1 and times_s[-1] > times_s[0] else 30.0
     xy = np.asarray(trajectory, np.float64)[:, :2]
-    return float(np.sqrt(np.mean(np.sum((xy - gaussian_filter1d(xy, fps / 2.0, axis=0, mode="nearest")) ** 2,
-                                        axis=1)))) if len(xy) > 1 else 0.0
+    return float(np.sqrt(np.mean(np.sum((xy - gaussian_filter1d(xy, _fps(times_s) / 2.0, axis=0, mode="nearest"))
+                                        ** 2, axis=1)))) if len(xy) > 1 else 0.0
+
+
+def _fps(times_s: list[float]) -> float:
+    """Frames a second from the frames' times (30 when they do not tell)."""
+    return (len(times_s) - 1) / (times_s[-1] - times_s[0]) if len(times_s) > 1 and times_s[-1] > times_s[0] else 30.0
 
 
 class FrameChain:
