@@ -4,7 +4,8 @@
 flow's 640 px working size, deblurring over +-6 frames). ``fast``: less of the expensive parts, above all motion
 inpainting (eqs. 24-25): local flow to the two nearest neighbours at a 320 px working size, no mosaic check
 (its moving-content replacement rides on the same flows), no local registration of the neighbours before the
-mosaic (ECC per neighbour: the largest stage of a default run), deblurring over +-3 frames. What
+mosaic (ECC per neighbour: the largest stage of a default run), no moving content carried on from the neighbours on
+either side (two more flows), deblurring over +-3 frames. What
 it costs and gives against the default and against mosaic + Telea (OpenCV's chain): docs/benchmarks-speed.md.
 """
 
@@ -25,6 +26,6 @@ def with_quality(config: StabilizeConfig, quality: str) -> StabilizeConfig:
     if quality == "default":
         return config
     completion = dataclasses.replace(config.completion, max_warp_neighbours=2, flow_max_side=320, check_mosaic=False,
-                                     register_model=None)
+                                     register_model=None, extrapolate_motion=False)
     deblur = dataclasses.replace(config.deblur, neighbour_frames=min(config.deblur.neighbour_frames, 3))
     return dataclasses.replace(config, completion=completion, deblur=deblur)

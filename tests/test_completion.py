@@ -175,6 +175,38 @@ def test_an_object_that_passed_through_the_border_in_one_neighbour_is_not_pasted
     assert scene_share(completion.CompletionConfig(static_candidate_error=None)) < 0.4
 
 
+def test_an_object_leaving_through_the_border_is_carried_on_by_its_own_motion_not_pasted_where_neighbours_saw_it():
+    """A disc moving 8 px a frame to the right straddles the edge of a 60 px border strip: frame t's surroundings
+    show only its left part, so the local warps' flows (measured there and inpainted outwards) paste the neighbours'
+    copies where they saw it; t-1 and t-2 (and t+1, t+2) see it move, which carries their copy on to frame t."""
+    background = _photo()
+
+    def scene(offset: float) -> tuple[np.ndarray, np.ndarray]:
+        return _disc_scene(offset, background, speed=8.0)
+
+    truth, disc = scene(0)
+    missing = np.zeros(truth.shape[:2], bool)
+    missing[:, -60:] = True
+    target = truth.copy()
+    target[missing] = 0
+    frames = {offset: scene(offset)[0] for offset in (-3, -2, -1, 1, 2, 3)}
+    seen = disc.copy()
+    for offset in frames:
+        seen |= scene(offset)[1]
+    judged = missing & seen  # where the disc is, or where a neighbour showed it
+
+    def strip_psnr(config: completion.CompletionConfig) -> tuple[float, float]:
+        result = completion.complete(target, missing, _neighbours(frames), config)
+        np.testing.assert_array_equal(result.frame[~missing], truth[~missing])
+        return psnr(result.frame, truth, judged), psnr(result.frame, truth, missing)
+
+    (carried, carried_strip), (pasted, pasted_strip) = (
+        strip_psnr(completion.CompletionConfig()), strip_psnr(completion.CompletionConfig(extrapolate_motion=False)))
+    # Measured: 23.6 against 15.9 dB over those pixels, 27.1 against 20.0 over the strip.
+    assert carried > pasted + 4.0, (carried, pasted)
+    assert carried_strip > pasted_strip + 3.0, (carried_strip, pasted_strip)
+
+
 def test_moving_object_in_the_missing_area_is_synthesized_not_painted_over_with_background():
     background = _photo()
     truth, object_mask = _disc_scene(0, background)
