@@ -556,16 +556,24 @@ class _BoxView:
     @staticmethod
     def of(box: tuple[slice, slice], target: np.ndarray, known: np.ndarray, focus: np.ndarray,
            near_missing: np.ndarray, scale: float, target_original: WarpedNeighbour | None = None) -> _BoxView:
-        height, width = box[0].stop - box[0].start, box[1].stop - box[1].start
-        size = (max(round(width * scale), 8), max(round(height * scale), 8))
-        if not (size[0] < width and size[1] < height):
+        size = _working_size(box, scale)
+        if size is None:
             return _BoxView(box, None, 1.0, target[box], known[box], focus[box], near_missing[box])
+        width = box[1].stop - box[1].start
         if target_original is not None:
             small_target, small_known = target_original.crop(box, size)  # resampled as the neighbours are
         else:
             small_target, small_known = shrink(target[box], size), shrink_all(known[box], size)
         return _BoxView(box, size, size[0] / width, small_target, small_known, shrink_any(focus[box], size),
                         shrink_any(near_missing[box], size))
+
+
+def _working_size(box: tuple[slice, slice], scale: float) -> tuple[int, int] | None:
+    """(width, height) of ``box`` at the flow's working resolution (``scale`` of the frame's, at least 8 px a side);
+    None where that would not shrink it (work at full resolution)."""
+    height, width = box[0].stop - box[0].start, box[1].stop - box[1].start
+    size = (max(round(width * scale), 8), max(round(height * scale), 8))
+    return size if size[0] < width and size[1] < height else None
 
 
 def _flow_in_box(view: _BoxView, neighbour_rgb: np.ndarray, neighbour_valid: np.ndarray,
@@ -911,36 +919,34 @@ def _extrapolated_candidates(neighbours: Sequence[WarpedNeighbour], at_missing: 
     the neighbour saw it, a frame or more stale, while the two neighbours on one side still see it move
     (docs/completion.md)."""
     index_of = {neighbour.offset: i for i, neighbour in enumerate(neighbours)}
+    # No pixel both neighbours cover: no sample to take, no flow to measure. (Skipping frames whose two neighbours also
+    # look alike there halved the cost but switched the candidate on and off from frame to frame: selh_tasc's
+    # synthesized-pixel flicker 1.29 -> 1.41.)
+    sides = [side for side in (-1, 1) if side in index_of and 2 * side in index_of
+             and (at_missing[index_of[side]][1][needing] & at_missing[index_of[2 * side]][1][needing]).any()]
+    if not sides:
+        return []
     m = len(needing)
     points_y = np.concatenate([ys[needing], local_error.band_y])
     points_x = np.concatenate([xs[needing], local_error.band_x])
+    # Both sides' flows over one box: every pixel needing a local warp with the local flows' margin of context, at
+    # their working resolution. On a box around the covered pixels alone, or at half that resolution, DIS lost the
+    # objects' motion (synthetic rocket seed 13: +5.67 dB over mosaic + Telea against +3.55 and +2.76).
+    height, width = neighbours[index_of[sides[0]]].shape
+    scale = flow_scale((height, width), config)
+    margin = round((config.flow_margin_px if config.flow_margin_px is not None else max(height, width)) / scale)
+    rows = slice(max(int(ys[needing].min()) - margin, 0), min(int(ys[needing].max()) + 1 + margin, height))
+    cols = slice(max(int(xs[needing].min()) - margin, 0), min(int(xs[needing].max()) + 1 + margin, width))
+    size = _working_size((rows, cols), scale)
+    step_x, step_y = ((1.0, 1.0) if size is None
+                      else (size[0] / (cols.stop - cols.start), size[1] / (rows.stop - rows.start)))
+    # Working-resolution coordinates of the points (pixel centres map to pixel centres); outside the box a point is
+    # not measured.
+    u = ((points_x - cols.start + 0.5) * step_x - 0.5).astype(np.float32)
+    v = ((points_y - rows.start + 0.5) * step_y - 0.5).astype(np.float32)
     out = []
-    for side in (-1, 1):
-        if side not in index_of or 2 * side not in index_of:
-            continue
+    for side in sides:
         near, far = neighbours[index_of[side]], neighbours[index_of[2 * side]]
-        # No pixel both neighbours cover: no sample to take, no flow to measure. (Skipping frames whose two neighbours
-        # also look alike there halved the cost but switched the candidate on and off from frame to frame: selh_tasc's
-        # synthesized-pixel flicker 1.29 -> 1.41.)
-        if not (at_missing[index_of[side]][1][needing] & at_missing[index_of[2 * side]][1][needing]).any():
-            continue
-        # The flow over every pixel needing a local warp with the local flows' margin of context, at their working
-        # resolution: on a box around the covered pixels alone, or at half that resolution, DIS lost the
-        # objects' motion (synthetic rocket seed 13: +5.67 dB over mosaic + Telea against +3.55 and +2.76).
-        height, width = near.shape
-        scale = flow_scale((height, width), config)
-        margin = round((config.flow_margin_px if config.flow_margin_px is not None else max(height, width)) / scale)
-        rows = slice(max(int(ys[needing].min()) - margin, 0), min(int(ys[needing].max()) + 1 + margin, height))
-        cols = slice(max(int(xs[needing].min()) - margin, 0), min(int(xs[needing].max()) + 1 + margin, width))
-        box_width, box_height = cols.stop - cols.start, rows.stop - rows.start
-        size = (max(round(box_width * scale), 8), max(round(box_height * scale), 8))
-        if not (size[0] < box_width and size[1] < box_height):
-            size = None
-        step_x, step_y = (1.0, 1.0) if size is None else (size[0] / box_width, size[1] / box_height)
-        # Working-resolution coordinates of the points (pixel centres map to pixel centres); outside the box a
-        # point is not measured.
-        u = ((points_x - cols.start + 0.5) * step_x - 0.5).astype(np.float32)
-        v = ((points_y - rows.start + 0.5) * step_y - 0.5).astype(np.float32)
         near_rgb, near_valid = near.crop((rows, cols), size)
         far_rgb, far_valid = far.crop((rows, cols), size)
         flow = local_flow.local_flow(near_rgb, near_valid, far_rgb, far_valid, config.flow)
