@@ -261,16 +261,22 @@ def _compared(ours: BenchRow | None, peer: BenchRow | None, ours_name: str, peer
     missing = [name for name, row in ((ours_name, ours), (peer_name, peer)) if row is None or not row.seconds]
     if missing:
         return f"{ours_name} vs {peer_name}: n/a ({', '.join(missing)} not measured)"
-    parts, met = [], True
+    parts, met, unmeasured = [], True, []
     for label, a, b, bound in (("wall", ours.seconds, peer.seconds, wall_bound),
                                ("CPU", ours.cpu_seconds, peer.cpu_seconds, cpu_bound)):
         if a is None or not b:
+            if bound is not None:
+                unmeasured.append(label)  # a bound with nothing to hold it against: no verdict
             continue
         parts.append(f"{label} {a / b:.2f}x")
         if bound is not None:
             met = met and a / b <= bound
-    judged = wall_bound is not None or cpu_bound is not None
-    verdict = f" ({'met' if met else 'not met'})" if judged else ""
+    if unmeasured:
+        verdict = f" (not judged: {' and '.join(unmeasured)} not measured)"
+    elif wall_bound is not None or cpu_bound is not None:
+        verdict = f" ({'met' if met else 'not met'})"
+    else:
+        verdict = ""
     return f"{ours_name} {_seconds(ours)} vs {peer_name} {_seconds(peer)}: {', '.join(parts)}{verdict}"
 
 
@@ -286,36 +292,35 @@ def targets(rows: Sequence[BenchRow]) -> list[str]:
     compares it at its own codec, unjudged)."""
     lines = ["speed targets read off this table (wall / CPU seconds; ratio = ffviz / peer; printed, never asserted):"]
     grouped = _by_clip(rows)
-    at_640 = lambda r: (r.width, r.height) == (640, 360)  # noqa: E731
-    everywhere = lambda r: True  # noqa: E731
+    # (title, which clips it applies to by their input row (None: not read off this table), what to say without
+    # one, (ffviz method, peer, wall bound, CPU bound) each, a bound None: not judged)
     sections = (
-        ("1. none and crop: wall <= vid.stab's", everywhere,
+        ("1. none and crop: wall <= vid.stab's", lambda r: True, "no clip in this run",
          (("ffviz none", "vidstab", 1.0, None), ("ffviz crop", "vidstab", 1.0, None))),
-        ("2. full at 640x360: wall <= the OpenCV sample's, CPU <= 1.3x its", at_640,
+        ("2. full at 640x360: wall <= the OpenCV sample's, CPU <= 1.3x its",
+         lambda r: (r.width, r.height) == (640, 360), "no 640x360 clip in this run",
          (("ffviz full", "opencv", 1.0, 1.3), ("ffviz full mpeg4", "opencv", None, None))),
+        ("3. --quality fast: judged on ground truth by benchmarks/fast_preset.py (docs/benchmarks-speed.md)", None, "",
+         ()),
+        (f"4. full at 1080p: CPU a frame <= {HD_CPU_BOUND:g}x the x264-only transcode's",
+         lambda r: r.height >= HD_ROWS, f"no clip of {HD_ROWS}+ rows in this run",
+         (("ffviz full", X264_ONLY, None, HD_CPU_BOUND),)),
     )
-    for title, applies, comparisons in sections:
+    for title, applies, none_text, comparisons in sections:
+        if applies is None:
+            lines.append(f"  {title}")
+            continue
         lines.append(f"  {title}:")
         clips = [(clip, methods) for clip, methods in grouped.items()
                  if "input" in methods and applies(methods["input"])]
         if not clips:
-            lines.append("    no clip it applies to in this run")
-            continue
+            lines.append(f"    {none_text}")
         for clip, methods in clips:
             for ours, peer, wall_bound, cpu_bound in comparisons:
                 if ours not in methods and ours.endswith("mpeg4"):
                     continue  # the unjudged same-codec row is optional
                 text = _compared(methods.get(ours), methods.get(peer), ours, peer, wall_bound, cpu_bound)
                 lines.append(f"    {clip}: {text}")
-    lines.append("  3. --quality fast: judged on ground truth by benchmarks/fast_preset.py (docs/benchmarks-speed.md)")
-    lines.append(f"  4. full at 1080p: CPU a frame <= {HD_CPU_BOUND:g}x the x264-only transcode's:")
-    hd = [(clip, methods) for clip, methods in grouped.items()
-          if "input" in methods and methods["input"].height >= HD_ROWS]
-    if not hd:
-        lines.append(f"    no clip of {HD_ROWS}+ rows in this run")
-    for clip, methods in hd:
-        text = _compared(methods.get("ffviz full"), methods.get(X264_ONLY), "ffviz full", X264_ONLY, None, HD_CPU_BOUND)
-        lines.append(f"    {clip}: {text}")
     return lines + _stolen(rows) + _encoder_floor(grouped)
 
 

@@ -222,6 +222,10 @@ def test_targets_compare_wall_and_cpu_with_the_peers_against_each_bound():
     assert "CPU 2.10x (not met)" in slow
     assert any("no clip of 1080+ rows" in line for line in targets(rows[:5]))
     assert "hd.mp4: ffviz full vs x264 only: n/a (x264 only not measured)" in "\n".join(targets(rows[:-1]))
+    # A bound with no measure to hold against it gives no verdict (not "met").
+    no_cpu = "\n".join(targets(rows[:-2] + [row("hd.mp4", "ffviz full", (1920, 1080), 15.0), rows[-1]]))
+    assert "hd.mp4: ffviz full 15.00 / - s vs x264 only 5.00 / 10.00 s: wall 3.00x (not judged: CPU not measured)" \
+        in no_cpu
     assert any("3. --quality fast" in line for line in targets(rows))
     floor = "\n".join(targets(rows))
     assert "hd.mp4: x264 only 5.00 s = 33 % of ffviz full's" in floor
