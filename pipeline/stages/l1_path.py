@@ -231,14 +231,14 @@ def _solve(f_hat: np.ndarray, c_angle: np.ndarray, lower: np.ndarray, upper: np.
     bounds = np.column_stack([np.r_[lower.ravel(), np.zeros(n_vars - n_q)],
                               np.r_[upper.ravel(), np.full(n_vars - n_q, np.inf)]])
     # HiGHS's interior point (with crossover): the same optimum as its default (the dual simplex here) within
-    # 0.1 px of a frame corner, in about two thirds of the time on long crop-window programs
-    result = scipy.optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds,
-                                    method="highs-ipm")
-    if result.status != 0 or result.x is None:
-        # The interior point can stop on a numerical error (HiGHS status 4) where the dual simplex solves the same
-        # program; falling through to the input path would instead jump at a pinned window's first frames.
+    # 0.1 px of a frame corner, in about two thirds of the time on long crop-window programs. It can stop on a
+    # numerical error (HiGHS status 4) where the dual simplex solves the same program; falling through to the input
+    # path would instead jump at a pinned window's first frames.
+    for method in ("highs-ipm", "highs-ds"):
         result = scipy.optimize.linprog(cost, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds,
-                                        method="highs-ds")
+                                        method=method)
+        if result.status == 0 and result.x is not None:
+            break
     if result.status != 0 or result.x is None:  # cannot happen: the input path (q = 0) is feasible; stay safe
         return np.clip(np.zeros((n, k)), lower, upper)
     return np.clip(result.x[:n_q].reshape(n, k), lower, upper)
