@@ -37,7 +37,7 @@ class _FullModeAudit(NullObserver):
         self.input_dark: list[float] = []
         self.missing: list[float] = []
         self.black: list[float] = []
-        self.sources = np.zeros(4)
+        self.sources = np.zeros(len(completion.SOURCE_NAMES))
         self.cross_cut = 0
 
     def on_path(self, plan) -> None:
@@ -55,7 +55,7 @@ class _FullModeAudit(NullObserver):
             dark = result.frame[missing].max(axis=1) <= DARK
             self.black.append(max(float(dark.mean()) - self.input_dark[frame.stamp.index], 0.0))
             codes = result.source[missing]
-            self.sources += np.bincount(codes, minlength=4)[:4]
+            self.sources += np.bincount(codes, minlength=len(completion.SOURCE_NAMES))
         # Every neighbour completion was handed (mosaic and local warp alike).
         used = set(result.neighbour_order) | {fill.offset for fill in result.fills}
         t = frame.stamp.index
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{clip.name[:34]:34} {n_in:>5}->{n_out:<5} {dst.width:>4}x{dst.height:<5} "
                   f"{float(src.fps):>6.2f}->{float(dst.fps):<6.2f} {len(report.cuts):>4} "
                   f"{np.mean(audit.missing):>7.3f} {np.mean(audit.black or [0]):>7.4f} {max(audit.black or [0]):>7.4f} "
-                  f"{filled[completion.SOURCE_MOSAIC]:>6.3f} {filled[completion.SOURCE_LOCAL_WARP]:>6.3f} "
+                  f"{filled[completion.SOURCE_MOSAIC]:>6.3f} {filled[list(completion.NEIGHBOUR_SOURCES)].sum():>6.3f} "
                   f"{filled[completion.SOURCE_FALLBACK]:>6.3f} {audit.cross_cut:>5} {seconds:>6.0f} "
                   f"{n_in / seconds:>7.2f}", flush=True)
     return 0

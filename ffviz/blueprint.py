@@ -39,7 +39,8 @@ TAB_NOTES = {
     "local flow + motion inpainting": (
         "**Local flow** (eq. 23) between a neighbour and the frame over their common area, **motion "
         "inpainting** of that flow into the missing area by Fast Marching (eq. 24, visiting order and arrival "
-        "time T) and **local-warp mosaicing** (eq. 25): which neighbour filled each pixel."),
+        "time T) and **local-warp mosaicing** (eq. 25): which neighbour filled each pixel (filled by) and how "
+        "(filled how): its local warp, its moving content carried on by a frame, or its sample as it is."),
     "deblurring": ("**Deblurring** (thesis ch. 5): relative blurriness b_t (eq. 28: one over the gradient "
                    "energy, higher is blurrier); a blurrier frame takes pixels from sharper aligned neighbours, "
                    "weighted by eqs. 30-31. Before / after show only frames that were sharpened."),
@@ -189,8 +190,9 @@ def inpainting_tab() -> rrb.Container:
         ),
         rrb.Horizontal(
             _image("filled by (eq. 25)", ent.COMPLETION_FRAME, ent.COMPLETION_FILLED_BY),
+            _image("filled how", ent.COMPLETION_FRAME, ent.COMPLETION_SOURCE),
             _image("completed", ent.COMPLETION_FRAME),
-            rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by")),
+            rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by"), _key("source", "filled how")),
             _note("local flow + motion inpainting"),
         ),
         name="local flow + motion inpainting",

@@ -79,8 +79,9 @@ COMPLETION_FMM_ORDER = "completion/fmm/order"
 COMPLETION_FMM_ARRIVAL = "completion/fmm/arrival"
 COMPLETION_FILLED_BY = "completion/filled_by"
 COMPLETION_FALLBACK = "completion/fallback"
+COMPLETION_SOURCE = "completion/source"  # how each pixel was filled: CompletionResult.source's classes
 COMPLETION_FRAME = "completion/frame"
-COMPLETION_STATS = "completion/stats"  # /{missing,mosaic,local_warp,fallback}: fraction of the frame
+COMPLETION_STATS = "completion/stats"  # /{missing,mosaic,local_warp,fallback,carried_on,neighbour_as_is}: share of the frame
 
 DEBLUR_BLURRINESS = "deblur/blurriness"  # b_t (eq. 28), every frame
 DEBLUR_NEIGHBOURS = "deblur/neighbours"  # how many sharper neighbours were interpolated from (eq. 30)
@@ -127,6 +128,7 @@ KEY_OF = {
     COMPLETION_FMM_ARRIVAL: "fmm_arrival",
     COMPLETION_FILLED_BY: "filled_by",
     COMPLETION_FALLBACK: "filled_by",
+    COMPLETION_SOURCE: "source",
     DEBLUR_WEIGHTS: "deblur_weights",
     DEBLUR_SOURCE: "deblur_source",
 }

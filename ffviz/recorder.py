@@ -33,7 +33,8 @@ import ffviz
 from ffviz import entities as ent, trace, visual
 from ffviz.blueprint import default_blueprint
 from pipeline import geometry
-from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult
+from pipeline.stages.completion import (SOURCE_AS_IS, SOURCE_CARRIED_ON, SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC,
+                                        SOURCE_NAMES, CompletionResult, from_a_neighbour)
 from pipeline.stages.motion import MotionEstimate
 from pipeline.stages.rolling_shutter import Correction
 from pipeline.results import FrameResult, PathComparison, PathPlan, Stamp
@@ -75,6 +76,12 @@ MISSING_LEGEND = [(0, "valid", (0, 0, 0, 0)), (MISSING_CLASS, "missing", (255, 0
 ACCEPTED_LEGEND = [(0, "known", (0, 0, 0, 0)), (1, "missing, rejected by the mosaic", (255, 0, 64, 160)),
                    (2, "missing, accepted by the mosaic", (40, 200, 90, 160))]
 FALLBACK_LEGEND = [(0, "other", (0, 0, 0, 0)), (1, "fallback", (255, 200, 0, 200))]
+# completion/source: how each pixel was filled (the classes are CompletionResult.source's codes)
+SOURCE_LEGEND = [(0, "original", (0, 0, 0, 0)), (SOURCE_MOSAIC, "mosaic", (40, 200, 90, 170)),
+                 (SOURCE_LOCAL_WARP, "local warp (flow)", (80, 150, 255, 190)),
+                 (SOURCE_FALLBACK, "fallback", (255, 200, 0, 200)),
+                 (SOURCE_CARRIED_ON, "carried on (moving content)", (230, 60, 200, 200)),
+                 (SOURCE_AS_IS, "neighbour as is (no local motion)", (150, 110, 60, 190))]
 CROP_COLOUR = (255, 220, 0)
 FOREGROUND_COLOUR = (255, 150, 0)  # tracks of the motion not taken for the camera's
 IGNORED_COLOUR = (200, 120, 255)  # outline of --ignore / --ignore-mask
@@ -102,7 +109,7 @@ class Nested(str):
 _MOTION_SERIES = tuple(f"{ent.MOTION_PARAMS}/{name}" for name in ent.MOTION_PARAM_NAMES)
 _TRAJECTORY = {root: tuple(f"{root}/{axis}" for axis in ent.TRAJECTORY_AXES)
                for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)}
-_COMPLETION_STATS = tuple(f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback"))
+_COMPLETION_STATS = tuple(f"{ent.COMPLETION_STATS}/{name.replace(' ', '_')}" for name in ("missing", *SOURCE_NAMES[1:]))
 
 # The one table from result field to recording: every field of every result type the recorder receives, with the
 # entity paths it is recorded under, Nested (another type's row), or NotRecorded and why. Keyed by type name, the
@@ -205,7 +212,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "mosaic": Nested("MosaicResult"),
         "neighbour_order": NotRecorded("the order neighbours were tried in; filled_by shows which one served"),
         "fills": Nested("NeighbourFill"),
-        "source": _COMPLETION_STATS + (ent.COMPLETION_FILLED_BY,),
+        "source": _COMPLETION_STATS + (ent.COMPLETION_SOURCE, ent.COMPLETION_FILLED_BY),
         "filled_by": (ent.COMPLETION_FILLED_BY,),
         "fallback": (ent.COMPLETION_FALLBACK,),
         "corrected": NotRecorded("mosaic pixels replaced by a local warp; shown within filled_by"),
@@ -507,6 +514,7 @@ class RerunRecorder:
         for entity, legend, title in ((ent.STABILIZED_MISSING, MISSING_LEGEND, "missing area"),
                                       (ent.COMPLETION_ACCEPTED, ACCEPTED_LEGEND, "mosaic (eqs. 20-21)"),
                                       (ent.COMPLETION_FALLBACK, FALLBACK_LEGEND, "fallback"),
+                                      (ent.COMPLETION_SOURCE, SOURCE_LEGEND, "filled how"),
                                       (ent.COMPLETION_FILLED_BY, self._filled_by_legend(), "filled by"),
                                       (ent.DEBLUR_SOURCE, self._deblur_source_legend(), "deblurred pixel from")):
             self.rec.log(entity, rr.AnnotationContext(legend), static=True)
@@ -524,7 +532,9 @@ class RerunRecorder:
                   f"{ent.COMPLETION_STATS}/missing": ("missing", (240, 60, 80)),
                   f"{ent.COMPLETION_STATS}/mosaic": ("mosaic", (60, 200, 90)),
                   f"{ent.COMPLETION_STATS}/local_warp": ("local warp (motion inpainting)", (80, 150, 255)),
-                  f"{ent.COMPLETION_STATS}/fallback": ("fallback", (255, 200, 0))}
+                  f"{ent.COMPLETION_STATS}/fallback": ("fallback", (255, 200, 0)),
+                  f"{ent.COMPLETION_STATS}/carried_on": ("carried on (moving content)", (230, 60, 200)),
+                  f"{ent.COMPLETION_STATS}/neighbour_as_is": ("neighbour as is", (150, 110, 60))}
         for entity, (name, colour) in styles.items():
             self.rec.log(entity, rr.SeriesLines(names=name, colors=[colour], widths=2.0), static=True)
         self.rec.log(ent.DEBLUR_REFUSED, rr.SeriesLines(names="a neighbour refused (share)", colors=[(230, 40, 60)]),
@@ -571,6 +581,7 @@ class RerunRecorder:
                                                 "deblurring weights (eqs. 30-31)", fmt="{:.2f}"),
             "missing": visual.palette_key([(n, c) for _, n, c in MISSING_LEGEND[1:]], "stabilized frame"),
             "accepted": visual.palette_key([(n, c) for _, n, c in ACCEPTED_LEGEND[1:]], "mosaic (eqs. 20-21)"),
+            "source": visual.palette_key([(n, c) for _, n, c in SOURCE_LEGEND[1:]], "filled how"),
             "filled_by": visual.palette_key(
                 [("mosaic", (40, 200, 90, 170)), ("fallback", (255, 200, 0, 200))]
                 + [(f"neighbour {o:+d}", c) for o, c in ((-10, _offset_colour(-10)), (-1, _offset_colour(-1)),
@@ -824,6 +835,7 @@ class RerunRecorder:
                       np.where(result.mosaic.accepted, 2, np.where(result.missing, 1, 0)).astype(np.uint8),
                       ACCEPTED_LEGEND)
         self._classes(ent.COMPLETION_FILLED_BY, self._filled_by_classes(result), self._filled_by_legend())
+        self._classes(ent.COMPLETION_SOURCE, result.source, SOURCE_LEGEND)
         self._classes(ent.COMPLETION_FALLBACK, result.fallback.astype(np.uint8), FALLBACK_LEGEND)
         if result.fills:
             first = result.fills[0]
@@ -843,11 +855,12 @@ class RerunRecorder:
                 self.rec.log(entity, rr.Clear(recursive=True))
 
     def _filled_by_classes(self, result: CompletionResult) -> np.ndarray:
-        """Class per pixel: 0 original, 1 mosaic, 2 fallback, FILLED_BY_BASE + offset for local warps."""
+        """Class per pixel: 0 original, 1 mosaic, 2 fallback, FILLED_BY_BASE + offset where step 2 filled from one
+        neighbour (local warp, carried on or as is: completion/source tells which)."""
         classes = np.zeros(result.source.shape, np.uint8)
         classes[result.source == SOURCE_MOSAIC] = 1
         classes[result.source == SOURCE_FALLBACK] = 2
-        warped = result.source == SOURCE_LOCAL_WARP
+        warped = from_a_neighbour(result.source)
         classes[warped] = (FILLED_BY_BASE + result.filled_by[warped]).astype(np.uint8)
         return classes
 
@@ -936,7 +949,7 @@ class RerunRecorder:
         """Mosaic and local-warp stages, and the first neighbour's Fast Marching band (Fig. 18)."""
         self._trace(stamp, "mosaic", result.mosaic.frame)
         self._trace(stamp, "motion-inpainted", trace.local_warp_frame(result.mosaic.frame, result.frame,
-                                                                       result.source == SOURCE_LOCAL_WARP))
+                                                                       from_a_neighbour(result.source)))
         if not result.fills:
             return
         inpainted = result.fills[0].inpainted

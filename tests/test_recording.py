@@ -21,7 +21,7 @@ from ffviz.rrd import Recording
 from ffviz.viewer import rerun_executable
 from pipeline import geometry
 from pipeline.evaluation import synthetic
-from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC
+from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_MOSAIC, SOURCE_NAMES, from_a_neighbour
 from pipeline.stages.neighbours import WarpedNeighbour
 from pipeline.results import FrameResult, Stamp
 from pipeline.runtime.observer import Observers, StageCollector
@@ -34,7 +34,7 @@ TRACED = (5, 18)
 STAGES = ("motion", "smoothing", "input", "warp", "completion", "deblur", "output")
 PER_FRAME_IMAGES = (ent.INPUT_FRAME, ent.STABILIZED_FRAME, ent.STABILIZED_MISSING, ent.COMPLETION_FRAME,
                     ent.COMPLETION_VARIANCE, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY,
-                    ent.COMPLETION_FALLBACK, ent.OUTPUT_FRAME)
+                    ent.COMPLETION_FALLBACK, ent.COMPLETION_SOURCE, ent.OUTPUT_FRAME)
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +73,7 @@ def test_every_family_has_one_row_per_frame_on_both_timelines(full_run):
     series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
     series += [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)
                for axis in ent.TRAJECTORY_AXES]
-    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback")]
+    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback", "carried_on", "neighbour_as_is")]
     for entity in series:
         assert recording.scalars(entity)[0].tolist() == frames, entity
     motion = by_frame(collector, "motion")
@@ -121,8 +121,9 @@ def test_logged_values_equal_the_pipelines(full_run):
         filled_by = recording.image(ent.COMPLETION_FILLED_BY, t)
         np.testing.assert_array_equal(filled_by == 1, result.source == SOURCE_MOSAIC)
         np.testing.assert_array_equal(filled_by == 2, result.source == SOURCE_FALLBACK)
-        warped = result.source == SOURCE_LOCAL_WARP
+        warped = from_a_neighbour(result.source)
         np.testing.assert_array_equal(filled_by[warped].astype(int) - FILLED_BY_BASE, result.filled_by[warped])
+        np.testing.assert_array_equal(recording.image(ent.COMPLETION_SOURCE, t), result.source)
         if result.fills:
             inpainted = result.fills[0].inpainted
             order = recording.map(ent.COMPLETION_FMM_ORDER, t)
@@ -130,7 +131,8 @@ def test_logged_values_equal_the_pipelines(full_run):
             np.testing.assert_array_equal(recording.image(ent.COMPLETION_FLOW_IMAGE, t), visual.flow_to_rgb(inpainted.flow))
         frame_area = result.missing.size
         for name, value in (("missing", result.missing.sum()), ("fallback", result.fallback.sum()),
-                            ("local_warp", warped.sum())):
+                            *((name.replace(" ", "_"), (result.source == code).sum())
+                              for code, name in enumerate(SOURCE_NAMES) if code)):
             frames, values = recording.scalars(f"{ent.COMPLETION_STATS}/{name}")
             assert values[t] == pytest.approx(value / frame_area, abs=1e-12)
 
@@ -202,7 +204,7 @@ def test_traced_frames_step_through_every_stage_in_order(full_run):
         for stage, text in labels.items():
             assert text.endswith(ent.TRACE_STAGES[stage]) and f"frame {t}" in text
         result = completion[t]
-        local_warp = np.where((result.source == SOURCE_LOCAL_WARP)[..., None], result.frame, result.mosaic.frame)
+        local_warp = np.where(from_a_neighbour(result.source)[..., None], result.frame, result.mosaic.frame)
         expected = {0: inputs[t].rgb, 1: warps[t].frame, 2: result.mosaic.frame, 3: local_warp, 5: outputs[t]}
         if t in deblurred:
             expected[4] = deblurred[t].frame
@@ -418,8 +420,9 @@ def test_masks_are_exact_and_maps_within_half_a_step(compact_run):
         np.testing.assert_array_equal(recording.image(ent.COMPLETION_ACCEPTED, t) == 2, result.mosaic.accepted)
         np.testing.assert_array_equal(recording.image(ent.COMPLETION_FALLBACK, t) > 0, result.fallback)
         filled_by = recording.image(ent.COMPLETION_FILLED_BY, t)
-        warped = result.source == SOURCE_LOCAL_WARP
+        warped = from_a_neighbour(result.source)
         np.testing.assert_array_equal(filled_by == 1, result.source == SOURCE_MOSAIC)
+        np.testing.assert_array_equal(recording.image(ent.COMPLETION_SOURCE, t), result.source)
         np.testing.assert_array_equal(filled_by[warped].astype(int) - FILLED_BY_BASE, result.filled_by[warped])
         variance = recording.map(ent.COMPLETION_VARIANCE, t)
         truth = result.mosaic.variance
@@ -489,7 +492,8 @@ def test_masks_are_drawn_over_their_frames_and_let_them_show(compact_run):
 
     recording = compact_run[1]
     under = {ent.STABILIZED_MISSING: ent.STABILIZED_FRAME, ent.COMPLETION_ACCEPTED: ent.COMPLETION_FRAME,
-             ent.COMPLETION_FILLED_BY: ent.COMPLETION_FRAME, ent.DEBLUR_SOURCE: ent.DEBLUR_AFTER}
+             ent.COMPLETION_FILLED_BY: ent.COMPLETION_FRAME, ent.COMPLETION_SOURCE: ent.COMPLETION_FRAME,
+             ent.DEBLUR_SOURCE: ent.DEBLUR_AFTER}
     def views(item):
         if isinstance(item, rr.blueprint.View):
             yield item
@@ -501,7 +505,8 @@ def test_masks_are_drawn_over_their_frames_and_let_them_show(compact_run):
     for mask, frame in under.items():
         holding = [contents for contents in shown_with if f"/{mask}" in contents]
         assert holding and all(contents.index(f"/{frame}") < contents.index(f"/{mask}") for contents in holding), mask
-    for mask in (ent.STABILIZED_MISSING, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY, ent.COMPLETION_FALLBACK):
+    for mask in (ent.STABILIZED_MISSING, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY, ent.COMPLETION_FALLBACK,
+                 ent.COMPLETION_SOURCE):
         opacity = component_values(recording, mask, "EncodedImage:opacity")
         assert opacity and max(opacity) < 1.0, mask
         assert min(component_values(recording, mask, "EncodedImage:draw_order")) > 0, mask
@@ -705,7 +710,7 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
     series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
     paths = (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)
     series += [f"{root}/{axis}" for root in paths for axis in ent.TRAJECTORY_AXES]
-    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback")]
+    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback", "carried_on", "neighbour_as_is")]
     series += [ent.DEBLUR_BLURRINESS, ent.DEBLUR_NEIGHBOURS, ent.DEBLUR_REFUSED]
     styles = {}
     for entity in series:
@@ -715,7 +720,7 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
         assert names and colours, f"{entity}: no SeriesLines style"
         styles[entity] = (names[0], colours[0])
     # Lines drawn in one chart never share a colour.
-    charts = [[f"{ent.COMPLETION_STATS}/{n}" for n in ("missing", "mosaic", "local_warp", "fallback")],
+    charts = [[f"{ent.COMPLETION_STATS}/{n}" for n in ("missing", "mosaic", "local_warp", "fallback", "carried_on", "neighbour_as_is")],
               [f"{ent.MOTION_PARAMS}/{n}" for n in ent.MOTION_PARAM_NAMES],
               [f"{root}/{axis}" for root in paths for axis in ("x", "y")],
               [f"{root}/angle" for root in paths]]
@@ -727,7 +732,7 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
 def test_class_colours_are_distinct_so_masks_read_back_exactly():
     from ffviz import recorder
 
-    for legend in (recorder.MISSING_LEGEND, recorder.ACCEPTED_LEGEND, recorder.FALLBACK_LEGEND,
+    for legend in (recorder.MISSING_LEGEND, recorder.ACCEPTED_LEGEND, recorder.FALLBACK_LEGEND, recorder.SOURCE_LEGEND,
                    RerunRecorder._filled_by_legend(), RerunRecorder._deblur_source_legend()):
         colours = [tuple(c) + ((255,) if len(c) == 3 else ()) for _, _, c in legend]
         assert len(set(colours)) == len(colours)

@@ -44,7 +44,7 @@ TruthOf = Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]
 @dataclass
 class CompletionScores:
     """Pooled squared errors of synthesized pixels, per method; split by what filled each pixel in our chain
-    (``by_source``, keyed by completion.SOURCE_NAMES: "mosaic", "local warp", "fallback") and by frame
+    (``by_source``, keyed by completion.SOURCE_NAMES: "mosaic", "local warp", "carried on", ...) and by frame
     (``by_frame``), so a loss can be traced to a stage and to the few frames that hold it. Each split sums to the
     pooled figures."""
 

@@ -42,9 +42,17 @@ from pipeline import geometry, imaging
 from pipeline.errors import ConfigError
 from pipeline.stages.neighbours import WarpedNeighbour, remap_points, shrink, shrink_all, shrink_any
 
-# What filled each pixel (CompletionResult.source).
-SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK = 0, 1, 2, 3
-SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback")
+# What filled each pixel (CompletionResult.source). Step 2 fills by three kinds of sample, each from one neighbour
+# (CompletionResult.filled_by): its local warp (flow + motion inpainting, eq. 25), its moving content carried on by a
+# frame (``extrapolate_motion``), or its sample as it is, with no local motion (the static candidate and fill).
+SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK, SOURCE_CARRIED_ON, SOURCE_AS_IS = 0, 1, 2, 3, 4, 5
+SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback", "carried on", "neighbour as is")
+NEIGHBOUR_SOURCES = (SOURCE_LOCAL_WARP, SOURCE_CARRIED_ON, SOURCE_AS_IS)  # step 2's: filled_by names the neighbour
+
+
+def from_a_neighbour(source: np.ndarray) -> np.ndarray:
+    """Where step 2 filled from one neighbour (``filled_by`` holds its offset there): any of NEIGHBOUR_SOURCES."""
+    return np.isin(source, NEIGHBOUR_SOURCES)
 # Distances in pixels of the local flow's working resolution (see CompletionConfig.flow_max_side).
 NEAR_MISSING_PX = 12  # motion inpainting works within this distance of the missing area (> flow's erosion)
 RESCUE_NEAR_MISSING_PX = 40  # large motions the flow missed are searched for this close to the missing area
@@ -223,7 +231,7 @@ class CompletionResult:
     neighbour_order: list[int]  # offsets by priority
     fills: list[NeighbourFill]
     source: np.ndarray  # (H, W) uint8: SOURCE_* per pixel
-    filled_by: np.ndarray  # (H, W) int16: neighbour offset of local-warp pixels, 0 elsewhere
+    filled_by: np.ndarray  # (H, W) int16: the neighbour's offset where step 2 filled (from_a_neighbour), 0 elsewhere
     fallback: np.ndarray  # (H, W) bool: pixels the last resort filled
     corrected: np.ndarray | None = None  # (H, W) bool: mosaic pixels the local warp replaced (moving content)
     registered: tuple[int, ...] = ()  # offsets of the neighbours whose warps local registration refined
@@ -419,10 +427,12 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
                 filled_by[py[which == k], px[which == k]] = fill.offset
             for index, offset in carried_from:
                 filled_by[py[which == index], px[which == index]] = offset
+                source[py[which == index], px[which == index]] = SOURCE_CARRIED_ON
             if static_from is not None:  # the candidate after the local warps: a neighbour's sample as it is
                 mine = which == len(fills)
                 filled_by[py[mine], px[mine]] = np.array([n.offset for n in neighbours], np.int16)[
                     static_from[among[mine]]]
+                source[py[mine], px[mine]] = SOURCE_AS_IS
 
     if config.static_fill and local_error is not None and remaining.any():
         rest = np.flatnonzero(remaining[ys, xs])
@@ -432,7 +442,7 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
         pick, which = rest[ok], which[ok]
         py, px = ys[pick], xs[pick]
         frame[py, px] = np.stack([c[pick] for c, _ in at_missing])[which, np.arange(len(pick))]
-        source[py, px] = SOURCE_LOCAL_WARP  # eq. 25 with zero local motion
+        source[py, px] = SOURCE_AS_IS  # eq. 25 with zero local motion
         filled_by[py, px] = np.array([n.offset for n in neighbours], np.int16)[which]
         remaining[py, px] = False
 
