@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import skimage.data
 
+from pipeline.errors import ConfigError
 from pipeline.stages import completion, neighbours
 from pipeline.evaluation.completion import (METHODS, CompletionScores, completion_scores, crop_completion_scores,
                                             jittered_crop)
@@ -218,6 +219,24 @@ def test_an_object_leaving_through_the_border_is_carried_on_by_its_own_motion_no
     # Measured: 23.6 against 15.9 dB over those pixels, 27.1 against 20.0 over the strip.
     assert carried > pasted + 4.0, (carried, pasted)
     assert carried_strip > pasted_strip + 3.0, (carried_strip, pasted_strip)
+
+
+def test_a_moving_candidate_replaces_the_mosaic_only_where_it_halves_the_static_scenes_error():
+    """On a motion-blurred frame every sharp sample explains the blurred surroundings worse, the static scene's
+    included: a moving candidate must beat it by the margin and by a share, not by the margin alone."""
+    def candidate(error: float) -> completion._Candidate:
+        return completion._Candidate(np.zeros((1, 3), np.uint8), np.ones(1, bool), np.full(1, 6.0, np.float32),
+                                     np.full(1, error, np.float32), np.ones(1, bool))
+
+    static_error = np.full(1, 30.0, np.float32)  # the mosaic's sample, on a blurred frame
+    chosen = np.zeros(1, np.int64)
+    default, margin_only = completion.CompletionConfig(), completion.CompletionConfig(mosaic_check_ratio=1.0)
+    for error, replaces, replaces_on_margin in ((20.0, False, True), (14.0, True, True), (27.0, False, False)):
+        assert completion._moving_and_better([candidate(error)], chosen, static_error, default)[0] == replaces
+        assert completion._moving_and_better([candidate(error)], chosen, static_error, margin_only)[0] == \
+            replaces_on_margin
+    with pytest.raises(ConfigError):
+        completion.CompletionConfig(mosaic_check_ratio=0.0)
 
 
 def test_moving_object_in_the_missing_area_is_synthesized_not_painted_over_with_background():

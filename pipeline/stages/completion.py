@@ -18,7 +18,8 @@ each pixel takes the candidate whose warp best explains the known surroundings i
 mean intensity difference after the warp around the pixel's nearest known pixel); a static sample no other
 neighbour confirms ranks after every confirmed one. The same evidence corrects the mosaic where its static
 assumption fails (a moving object shown as background by every neighbour it has left): a clearly moving
-candidate (``moving_px``) that beats the static scene by ``mosaic_check_margin`` replaces the mosaic pixel.
+candidate (``moving_px``) whose error is below the static scene's by ``mosaic_check_margin`` and below
+``mosaic_check_ratio`` of it replaces the mosaic pixel.
 
 Neighbours are taken nearest in time first, eq. 23's global alignment error breaking ties between t-k and
 t+k (``neighbour_order``); flows and inpainting run only in boxes around the pixels that need a local warp
@@ -70,8 +71,13 @@ class CompletionConfig:
     check_mosaic: bool = True  # let clearly moving local-warp candidates replace mosaic pixels
     moving_px: float = 2.0  # a candidate whose inpainted flow is longer than this shows moving content
     # A moving candidate replaces a mosaic pixel when its local alignment error is lower than that of the
-    # static scene (no local motion) by more than this (intensity, 0..255).
+    # static scene (no local motion) by more than this (intensity, 0..255) and at most this share of it. The
+    # share: on a motion-blurred frame every sharp sample's error grows with the blur, and the margin alone let a
+    # moving object's flow, carried into the strip by motion inpainting, replace the background the mosaic had
+    # right (benchmarks/dynamic_scene.py's person clips: +0.2 to +0.7 dB over the synthesized pixels on four of
+    # five, docs/decisions.md 2026-11-26). 1: the margin alone.
     mosaic_check_margin: float = 5.0
+    mosaic_check_ratio: float = 0.5
     # Flows are computed in boxes around the clusters of pixels needing a local warp, grown by this margin (px
     # of the flow's working resolution); None: over the whole frame. The margin is DIS's context: with 64 px
     # its coarsest pyramid level lost an object's 20-50 px motion (synthetic rocket scene -3.5 dB against
@@ -123,6 +129,8 @@ class CompletionConfig:
         if self.register_model is not None and self.register_model not in registration.MODEL_PARAMETERS:
             raise ConfigError(f"register_model must be one of {', '.join(registration.MODEL_PARAMETERS)} or None, "
                               f"not {self.register_model!r}")
+        if not 0.0 < self.mosaic_check_ratio <= 1.0:
+            raise ConfigError(f"mosaic_check_ratio must be in (0, 1], not {self.mosaic_check_ratio}")
         if self.static_candidate_error is not None and not self.static_candidate_error >= 0:
             raise ConfigError(f"static_candidate_error must be >= 0 or None, not {self.static_candidate_error}")
         if self.register_band_px < 1:
@@ -904,11 +912,13 @@ def _sample_intensity(image: registration.SourceImage, image_from_work: np.ndarr
 
 def _moving_and_better(candidates: list[_Candidate], chosen: np.ndarray, static_error: np.ndarray,
                        config: CompletionConfig) -> np.ndarray:
-    """Pixels whose chosen candidate moves and explains the surroundings clearly better than the static scene."""
+    """Pixels whose chosen candidate moves and explains the surroundings clearly better than the static scene: its
+    error under the static scene's by ``mosaic_check_margin`` and under ``mosaic_check_ratio`` of it."""
     pick = np.maximum(chosen, 0)[None]
     motion = np.take_along_axis(np.stack([c.motion for c in candidates]), pick, 0)[0]
     error = np.take_along_axis(np.stack([c.error for c in candidates]), pick, 0)[0]
-    return (chosen >= 0) & (motion > config.moving_px) & (error + config.mosaic_check_margin < static_error)
+    return ((chosen >= 0) & (motion > config.moving_px) & (error + config.mosaic_check_margin < static_error)
+            & (error < config.mosaic_check_ratio * static_error))
 
 
 def _extrapolated_candidates(neighbours: Sequence[WarpedNeighbour], at_missing: list[tuple[np.ndarray, np.ndarray]],
