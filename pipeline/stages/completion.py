@@ -18,8 +18,7 @@ each pixel takes the candidate whose warp best explains the known surroundings i
 mean intensity difference after the warp around the pixel's nearest known pixel); a static sample no other
 neighbour confirms ranks after every confirmed one. The same evidence corrects the mosaic where its static
 assumption fails (a moving object shown as background by every neighbour it has left): a clearly moving
-candidate (``moving_px``) whose error is below the static scene's by ``mosaic_check_margin`` and below
-``mosaic_check_ratio`` of it replaces the mosaic pixel.
+candidate (``moving_px``) replaces the mosaic pixel where it clearly beats the static scene's error (``mosaic_check_*``).
 
 Neighbours are taken nearest in time first, eq. 23's global alignment error breaking ties between t-k and
 t+k (``neighbour_order``); flows and inpainting run only in boxes around the pixels that need a local warp
