@@ -401,20 +401,23 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
         checked = accepted & (static_error > config.mosaic_check_margin)
         needing = np.flatnonzero(remaining[ys, xs] | checked)  # indices (into ys, xs) of the pixels to warp
         if len(needing):
+            # Every neighbour's samples at those pixels, and their intensities for the confirmation test, once for
+            # the local warps, the static candidate and the carried-on content.
+            at_needing = [(colours[needing], valid[needing]) for colours, valid in at_missing]
+            shown = _intensities(at_needing, config.confirm_difference)
             order, errors = _priority(target, known, neighbours, config.max_warp_neighbours)
             fills, candidates = _local_warps(target, known, missing, neighbours, order, errors, ys, xs, needing,
-                                             at_missing, local_error, config, target_original)
+                                             shown, local_error, config, target_original)
         if fills:
             # Candidates are over the ``needing`` pixels only.
             static_from = None
             if config.static_fill and config.static_candidate_error is not None:
-                static, static_from = _static_candidate(
-                    candidates, errors_without_motion()[:, needing], [(c[needing], v[needing]) for c, v in at_missing],
-                    config)
+                static, static_from = _static_candidate(candidates, errors_without_motion()[:, needing], at_needing,
+                                                        shown, config)
                 candidates.append(static)
             carried_from: list[tuple[int, int]] = []  # (candidate index, the neighbour's offset it samples)
             if config.extrapolate_motion:
-                for offset, carried in _extrapolated_candidates(neighbours, at_missing, ys, xs, needing, local_error,
+                for offset, carried in _extrapolated_candidates(neighbours, at_needing, ys, xs, needing, local_error,
                                                                 config):
                     carried_from.append((len(candidates), offset))
                     candidates.append(carried)
@@ -433,8 +436,9 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
                 fill.filled[py[which == k], px[which == k]] = True
                 filled_by[py[which == k], px[which == k]] = fill.offset
             for index, offset in carried_from:
-                filled_by[py[which == index], px[which == index]] = offset
-                source[py[which == index], px[which == index]] = SOURCE_CARRIED_ON
+                mine = which == index
+                filled_by[py[mine], px[mine]] = offset
+                source[py[mine], px[mine]] = SOURCE_CARRIED_ON
             if static_from is not None:  # the candidate after the local warps: a neighbour's sample as it is
                 mine = which == len(fills)
                 filled_by[py[mine], px[mine]] = np.array([n.offset for n in neighbours], np.int16)[
@@ -511,14 +515,14 @@ def _priority(target: np.ndarray, known: np.ndarray, neighbours: Sequence[Warped
 
 def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],
                  order: list[int], errors: list[float], ys: np.ndarray, xs: np.ndarray, needing: np.ndarray,
-                 at_missing: list[tuple[np.ndarray, np.ndarray]], local_error: _LocalError, config: CompletionConfig,
+                 shown: list[tuple[np.ndarray, np.ndarray]] | None, local_error: _LocalError, config: CompletionConfig,
                  target_original: WarpedNeighbour | None = None) -> tuple[list[NeighbourFill], list[_Candidate]]:
     """Steps 2-4 for the nearest ``max_warp_neighbours`` neighbours: local flow, motion inpainting, local warp.
 
     ``needing``: indices of the pixels to fill (ys, xs) that need it. Flow and motion inpainting run inside boxes
     around them only (``_work_boxes``), at the flow's working resolution; the local warp is sampled at those
     pixels and on the local error's band (the mosaic filled the others). The candidates returned are over the
-    ``needing`` pixels only.
+    ``needing`` pixels only. ``shown``: every neighbour's (intensity, valid) at them (``_intensities``).
     """
     height, width = missing.shape
     scale = flow_scale((height, width), config)
@@ -532,8 +536,6 @@ def _local_warps(target: np.ndarray, known: np.ndarray, missing: np.ndarray, nei
     points_y = np.concatenate([ys[needing], local_error.band_y])
     points_x = np.concatenate([xs[needing], local_error.band_x])
     m = len(needing)
-    shown = _intensities([(colours[needing], valid[needing]) for colours, valid in at_missing],
-                         config.confirm_difference)
     fills: list[NeighbourFill] = []
     candidates: list[_Candidate] = []
     for i in order:
@@ -768,13 +770,15 @@ def _best_candidate(candidates: list[_Candidate]) -> np.ndarray:
 
 
 def _best_static(errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]],
-                 confirm_difference: float | None) -> tuple[np.ndarray, np.ndarray]:
+                 confirm_difference: float | None, shown: list[tuple[np.ndarray, np.ndarray]] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel, the neighbour whose sample (zero local motion) to take: covering the pixel, with the lowest local
     alignment error (``errors``, (neighbours, m), NaN where unmeasured); a sample no other neighbour shows ranks
     after the confirmed ones, as in _best_candidate. Returns (index (m,), its rank (m,): the error, + 1e4 when
-    unconfirmed, inf where no neighbour has one)."""
+    unconfirmed, inf where no neighbour has one). ``shown``: the samples' ``_intensities`` when at hand."""
     ranked = np.full(errors.shape, np.inf, np.float32)
-    shown = _intensities(samples, confirm_difference)
+    if shown is None:
+        shown = _intensities(samples, confirm_difference)
     for i, (colours, valid) in enumerate(samples):
         confirmed = _seen_by_another(colours, i, shown, confirm_difference,
                                      value=None if shown is None else shown[i][0])
@@ -785,7 +789,8 @@ def _best_static(errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]
 
 
 def _static_candidate(candidates: list[_Candidate], errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]],
-                      config: CompletionConfig) -> tuple[_Candidate, np.ndarray]:
+                      shown: list[tuple[np.ndarray, np.ndarray]] | None, config: CompletionConfig
+                      ) -> tuple[_Candidate, np.ndarray]:
     """The best covering neighbour's sample as it is (``_best_static`` over all neighbours, not only the local-warp
     ones) as one more candidate, at the pixels where no local warp explains the surroundings within
     ``static_candidate_error``; its error counts ``static_candidate_margin`` higher, so a local warp that explains
@@ -794,7 +799,7 @@ def _static_candidate(candidates: list[_Candidate], errors: np.ndarray, samples:
     Why: a moving object's flow carried by motion inpainting into a border strip the object has already left pastes
     a stale copy of it there, and with few local-warp neighbours reaching the strip nothing better competes; the
     background those frames hide is often shown as it is by farther neighbours (docs/completion.md)."""
-    which, rank = _best_static(errors, samples, config.confirm_difference)
+    which, rank = _best_static(errors, samples, config.confirm_difference, shown)
     warped = np.min(np.stack([np.where(c.reached, c.error, np.inf) for c in candidates]), axis=0)
     reached = np.isfinite(rank) & (warped > config.static_candidate_error)
     colours = np.stack([c for c, _ in samples])[which, np.arange(len(which))]
@@ -920,11 +925,12 @@ def _moving_and_better(candidates: list[_Candidate], chosen: np.ndarray, static_
             & (error < config.mosaic_check_ratio * static_error))
 
 
-def _extrapolated_candidates(neighbours: Sequence[WarpedNeighbour], at_missing: list[tuple[np.ndarray, np.ndarray]],
+def _extrapolated_candidates(neighbours: Sequence[WarpedNeighbour], at_needing: list[tuple[np.ndarray, np.ndarray]],
                              ys: np.ndarray, xs: np.ndarray, needing: np.ndarray, local_error: _LocalError,
                              config: CompletionConfig) -> list[tuple[int, _Candidate]]:
     """Moving content carried on into frame t from either side: (offset s of the neighbour sampled, candidate over
-    the ``needing`` pixels) for s = -1 and +1 where neighbours s and 2s are both given.
+    the ``needing`` pixels) for s = -1 and +1 where neighbours s and 2s are both given (``at_needing``: every
+    neighbour's samples at those pixels).
 
     Frame t's content at p moved by v a frame was at p - v in frame t+s (s = -1; p + v for s = +1); the flow H from
     the warped neighbour t+s to t+2s is about -v (+v) on it, so the candidate is I_{t+s}(p + H(p)). H is taken at p
@@ -942,7 +948,7 @@ def _extrapolated_candidates(neighbours: Sequence[WarpedNeighbour], at_missing: 
     # look alike there halved the cost but switched the candidate on and off from frame to frame: selh_tasc's
     # synthesized-pixel flicker 1.29 -> 1.41.)
     sides = [side for side in (-1, 1) if side in index_of and 2 * side in index_of
-             and (at_missing[index_of[side]][1][needing] & at_missing[index_of[2 * side]][1][needing]).any()]
+             and (at_needing[index_of[side]][1] & at_needing[index_of[2 * side]][1]).any()]
     if not sides:
         return []
     m = len(needing)
