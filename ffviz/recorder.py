@@ -33,7 +33,8 @@ import ffviz
 from ffviz import entities as ent, trace, visual
 from ffviz.blueprint import default_blueprint
 from pipeline import geometry
-from pipeline.stages.completion import (SOURCE_AS_IS, SOURCE_CARRIED_ON, SOURCE_FALLBACK, SOURCE_LOCAL_WARP, SOURCE_MOSAIC,
+from pipeline.stages.completion import (SOURCE_AS_IS, SOURCE_CARRIED_ON, SOURCE_FALLBACK, SOURCE_LOCAL_WARP,
+                                        SOURCE_MAJORITY, SOURCE_MOSAIC,
                                         SOURCE_NAMES, CompletionResult, from_a_neighbour)
 from pipeline.stages.motion import MotionEstimate
 from pipeline.stages.rolling_shutter import Correction
@@ -81,7 +82,8 @@ SOURCE_LEGEND = [(0, "original", (0, 0, 0, 0)), (SOURCE_MOSAIC, "mosaic", (40, 2
                  (SOURCE_LOCAL_WARP, "local warp (flow)", (80, 150, 255, 190)),
                  (SOURCE_FALLBACK, "fallback", (255, 200, 0, 200)),
                  (SOURCE_CARRIED_ON, "carried on (moving content)", (230, 60, 200, 200)),
-                 (SOURCE_AS_IS, "neighbour as is (no local motion)", (150, 110, 60, 190))]
+                 (SOURCE_AS_IS, "neighbour as is (no local motion)", (150, 110, 60, 190)),
+                 (SOURCE_MAJORITY, "neighbours' majority (median, no local motion)", (0, 200, 200, 190))]
 CROP_COLOUR = (255, 220, 0)
 FOREGROUND_COLOUR = (255, 150, 0)  # tracks of the motion not taken for the camera's
 IGNORED_COLOUR = (200, 120, 255)  # outline of --ignore / --ignore-mask
@@ -534,7 +536,8 @@ class RerunRecorder:
                   f"{ent.COMPLETION_STATS}/local_warp": ("local warp (motion inpainting)", (80, 150, 255)),
                   f"{ent.COMPLETION_STATS}/fallback": ("fallback", (255, 200, 0)),
                   f"{ent.COMPLETION_STATS}/carried_on": ("carried on (moving content)", (230, 60, 200)),
-                  f"{ent.COMPLETION_STATS}/neighbour_as_is": ("neighbour as is", (150, 110, 60))}
+                  f"{ent.COMPLETION_STATS}/neighbour_as_is": ("neighbour as is", (150, 110, 60)),
+                  f"{ent.COMPLETION_STATS}/majority": ("neighbours' majority", (0, 200, 200))}
         for entity, (name, colour) in styles.items():
             self.rec.log(entity, rr.SeriesLines(names=name, colors=[colour], widths=2.0), static=True)
         self.rec.log(ent.DEBLUR_REFUSED, rr.SeriesLines(names="a neighbour refused (share)", colors=[(230, 40, 60)]),

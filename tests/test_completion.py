@@ -11,6 +11,8 @@ and with plain Telea. Measured when written (640x360 or the clip's size, 48 fram
 
 from __future__ import annotations
 
+import dataclasses
+
 import itertools
 
 import cv2
@@ -165,21 +167,26 @@ def test_an_object_that_passed_through_the_border_in_one_neighbour_is_not_pasted
     for offset in (-1, 1, -2):
         valid[offset] = ~lower
 
-    def scene_share(config: completion.CompletionConfig) -> tuple[float, float]:
-        """(share of the strip showing the scene, share filled by a neighbour's sample as it is)"""
+    def scene_share(config: completion.CompletionConfig) -> tuple[float, float, float]:
+        """(share of the strip showing the scene, share filled by a neighbour's sample as it is, by the majority)"""
         result = completion.complete(target, missing, _neighbours(frames, valid), config)
         np.testing.assert_array_equal(result.frame[~missing], truth[~missing])
         as_is = result.source == completion.SOURCE_AS_IS
         assert np.isin(result.filled_by[as_is], (-3, -4)).all()  # the neighbours that show the scene there
         return (float((np.abs(result.frame.astype(int) - truth).max(axis=2) <= 20)[lower].mean()),
-                float(as_is[lower].mean()))
+                float(as_is[lower].mean()), float((result.source == completion.SOURCE_MAJORITY)[lower].mean()))
 
     # The local warp of t+2 explains the band beside the strip badly (the object covers it there), so the scene as
     # t-3 and t-4 show it competes and wins, and completion/source says so; without that, t+2's guess fills most of
-    # the strip.
-    (scene, as_is), (scene_without, as_is_without) = (
-        scene_share(completion.CompletionConfig()), scene_share(completion.CompletionConfig(static_candidate_error=None)))
-    # Measured: 0.56 of the strip shows the scene, 0.30 of it t-3's or t-4's sample as it is; without, 0.26 and 0.
+    # the strip. Where t-3, t-4 and t+2 all cover the strip, two of three agree: their median (the majority
+    # candidate) explains the band as well as the scene does and fills most of it.
+    static_only = completion.CompletionConfig(majority_candidate=False)
+    scene_majority, _, majority = scene_share(completion.CompletionConfig())
+    (scene, as_is, _), (scene_without, as_is_without, _) = (
+        scene_share(static_only), scene_share(dataclasses.replace(static_only, static_candidate_error=None)))
+    # Measured: 0.999 of the strip shows the scene with the majority (0.89 of it by the majority); 0.56 without it, 0.30 of the strip t-3's or
+    # t-4's sample as it is; without either, 0.26 and 0.
+    assert scene_majority > 0.95 and majority > 0.8
     assert scene > 0.5 and as_is > 0.25
     assert scene_without < 0.4 and as_is_without < 0.1
 

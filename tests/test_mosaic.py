@@ -169,3 +169,30 @@ def test_no_missing_area_returns_the_frame_unchanged():
 def test_config_needs_two_neighbours_for_a_variance():
     with pytest.raises(ValueError):
         MosaicConfig(min_neighbours=1)
+
+
+def test_majority_median_leaves_out_what_a_minority_of_neighbours_showed():
+    """Eqs. 20-22 on the tightest strict majority: three of five samples agree (an object passed in the other two),
+    so the pixel is accepted with the median of the three; two against two has no majority; fewer than three
+    samples are not judged; the threshold applies to the majority's own variance."""
+    from pipeline.imaging import intensity
+    from pipeline.stages.mosaic import majority_median
+
+    def judge(levels, valid=None, threshold=100.0):
+        colours = np.array([[[v, v, v]] for v in levels], np.uint8)  # (n, 1, 3)
+        ok_valid = np.ones((len(levels), 1), bool) if valid is None else np.array(valid)[:, None]
+        return majority_median(colours, intensity(colours), ok_valid, threshold)
+
+    ok, median, member = judge([100, 230, 104, 20, 102])
+    assert ok[0] and (median[0] == 102).all()
+    np.testing.assert_array_equal(member[:, 0], [True, False, True, False, True])
+    ok, _, member = judge([100, 101, 200, 201])  # k = 3 of 4: no three agree
+    assert not ok[0] and not member.any()
+    ok, _, _ = judge([100, 101, 0], valid=[True, True, False])  # two samples: eq. 20's own rule, not a majority
+    assert not ok[0]
+    ok, median, _ = judge([90, 110, 100, 250, 10], threshold=99.5)  # the majority's variance is 100
+    assert not ok[0]
+    ok, median, _ = judge([90, 110, 100, 250, 10], threshold=100.5)
+    assert ok[0] and (median[0] == 100).all()
+    ok, median, member = judge([100, 102, 104, 106])  # even majority (3 of 4): the two middle ones' mean
+    assert ok[0] and member[:, 0].sum() == 3

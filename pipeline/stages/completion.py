@@ -5,7 +5,7 @@
 1. consistent mosaicing (eqs. 20-22, ``mosaic``): static areas, median of neighbours that agree;
 2. local-warp mosaicing: for the ``max_warp_neighbours`` nearest neighbours, local flow over the common area
    (``local_flow``), motion inpainting by Fast Marching (eq. 24, ``fmm``), a candidate through it (eq. 25); beside
-   them a covering neighbour's sample as it is, and moving content carried on from t+-1 and t+-2 (constant velocity);
+   them a neighbour's sample as it is, the median of the neighbours' majority, and moving content carried on;
 3. a smooth last-resort fill (``fallback``) for what no neighbour covers.
 
 Invariants: every neighbour arrives already warped into the target's stabilized coordinates, with its valid
@@ -44,9 +44,11 @@ from pipeline.stages.neighbours import WarpedNeighbour, remap_points, shrink, sh
 
 # What filled each pixel (CompletionResult.source). Step 2 fills by three kinds of sample, each from one neighbour
 # (CompletionResult.filled_by): its local warp (flow + motion inpainting, eq. 25), its moving content carried on by a
-# frame (``extrapolate_motion``), or its sample as it is, with no local motion (the static candidate and fill).
+# frame (``extrapolate_motion``), or its sample as it is, with no local motion (the static candidate and fill). A
+# fourth kind is the median of the neighbours' majority (``majority_candidate``): no one neighbour's.
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK, SOURCE_CARRIED_ON, SOURCE_AS_IS = 0, 1, 2, 3, 4, 5
-SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback", "carried on", "neighbour as is")
+SOURCE_MAJORITY = 6
+SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback", "carried on", "neighbour as is", "majority")
 NEIGHBOUR_SOURCES = (SOURCE_LOCAL_WARP, SOURCE_CARRIED_ON, SOURCE_AS_IS)  # step 2's: filled_by names the neighbour
 
 
@@ -112,6 +114,12 @@ class CompletionConfig:
     # content's motion in a frame) moves t+s's sample on by one frame, a candidate wherever it moves by more than
     # ``moving_px`` (see _extrapolated_candidates).
     extrapolate_motion: bool = True
+    # The median of the neighbours' strict majority as they are (mosaic.majority_median: eqs. 20-22 without the
+    # samples an object passing in a few neighbours made disagree) as one more candidate, its error the median local
+    # error of the majority's own samples. A local warp reaching such a pixel samples the nearest neighbours, which
+    # are the ones still showing the object; person clips of benchmarks/dynamic_scene.py +0.5 to +1.9 dB over the
+    # synthesized pixels (docs/decisions.md 2026-11-26).
+    majority_candidate: bool = True
     mosaic: mosaic.MosaicConfig = field(default_factory=mosaic.MosaicConfig)
     flow: local_flow.LocalFlowConfig = field(default_factory=local_flow.LocalFlowConfig)
     inpaint: fmm.MotionInpaintConfig = field(default_factory=fmm.MotionInpaintConfig)
@@ -415,6 +423,10 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
                 static, static_from = _static_candidate(candidates, errors_without_motion()[:, needing], at_needing,
                                                         shown, config)
                 candidates.append(static)
+            majority_index = None
+            if config.majority_candidate:
+                majority_index = len(candidates)
+                candidates.append(_majority_candidate(errors_without_motion()[:, needing], at_needing, shown, config))
             carried_from: list[tuple[int, int]] = []  # (candidate index, the neighbour's offset it samples)
             if config.extrapolate_motion:
                 for offset, carried in _extrapolated_candidates(neighbours, at_needing, ys, xs, needing, local_error,
@@ -444,6 +456,8 @@ def complete(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[Warpe
                 filled_by[py[mine], px[mine]] = np.array([n.offset for n in neighbours], np.int16)[
                     static_from[among[mine]]]
                 source[py[mine], px[mine]] = SOURCE_AS_IS
+            if majority_index is not None:
+                source[py[which == majority_index], px[which == majority_index]] = SOURCE_MAJORITY
 
     if config.static_fill and local_error is not None and remaining.any():
         rest = np.flatnonzero(remaining[ys, xs])
@@ -807,6 +821,24 @@ def _static_candidate(candidates: list[_Candidate], errors: np.ndarray, samples:
     # The confirmation is already in the rank (+1e4 when unconfirmed).
     return (_Candidate(colours, reached, np.zeros(len(which), np.float32), error, np.ones(len(which), bool)),
             which)
+
+
+def _majority_candidate(errors: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]],
+                        shown: list[tuple[np.ndarray, np.ndarray]] | None, config: CompletionConfig) -> _Candidate:
+    """The median of the covering neighbours' strict majority (``mosaic.majority_median``, as they are) where they
+    have one; its error is the median of the majority's own local errors without motion (``errors``, (neighbours, m),
+    NaN where unmeasured), so it competes with the local warps on how well those neighbours explain the
+    surroundings. Several neighbours agreeing is its confirmation."""
+    colours = np.stack([c for c, _ in samples])
+    valid = np.stack([v for _, v in samples])
+    values = (np.stack([i for i, _ in shown]) if shown is not None
+              else np.stack([imaging.intensity(c) for c, _ in samples]))
+    ok, median, member = mosaic.majority_median(colours, values, valid, config.mosaic.variance_threshold)
+    own = np.where(member, errors, np.nan)
+    measured = ok & ~np.isnan(own).all(axis=0)
+    error = np.full(len(ok), np.inf, np.float32)
+    error[measured] = _nan_median_columns(own[:, measured])
+    return _Candidate(median, measured, np.zeros(len(ok), np.float32), error, np.ones(len(ok), bool))
 
 
 def register_neighbours(target: np.ndarray, missing: np.ndarray, neighbours: Sequence[WarpedNeighbour],

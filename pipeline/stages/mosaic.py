@@ -17,7 +17,8 @@ objects (ghosts), a smaller one hands textured static edges on to the costlier l
 docs/completion.md).
 
 Only the missing pixels are gathered, as (n, m) samples, so the cost follows the missing area, not the frame;
-the median uses pairwise rank counting (faster than argsort along a short axis).
+the median uses pairwise rank counting (faster than argsort along a short axis). ``majority_median`` applies eqs.
+20-22 to the tightest strict majority of the samples, for completion's majority candidate; the mosaic stays eqs. 20-22.
 """
 
 from __future__ import annotations
@@ -124,13 +125,55 @@ def mosaic_from_samples(target: np.ndarray, missing: np.ndarray, colours: np.nda
     rank = _ranks(np.where(valid, values, np.inf))
     lower = np.argmax(rank == np.maximum(count - 1, 0) // 2, axis=0)
     upper = np.argmax(rank == count // 2, axis=0)
-    columns = np.arange(len(flat))
-    if colours.dtype == np.uint8:
-        median = ((colours[lower, columns].astype(np.uint16) + colours[upper, columns] + 1) // 2).astype(np.uint8)
-    else:  # float32 (deeper video): the exact middle
-        median = (colours[lower, columns] + colours[upper, columns]) * np.float32(0.5)
+    median = _middle(colours, lower, upper)
 
     frame.reshape(-1, 3)[flat[ok]] = median[ok]
     variance.reshape(-1)[flat] = sample_variance
     accepted.reshape(-1)[flat[ok]] = True
     return MosaicResult(frame, variance, accepted, missing & ~accepted, coverage)
+
+
+def _middle(colours: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Per column of ``colours`` (n, m, 3), the mean of the samples ``lower`` and ``upper`` (rows; the same one for an
+    odd count): rounded for uint8, exact for float32 (deeper video)."""
+    columns = np.arange(colours.shape[1])
+    if colours.dtype == np.uint8:
+        return ((colours[lower, columns].astype(np.uint16) + colours[upper, columns] + 1) // 2).astype(np.uint8)
+    return (colours[lower, columns] + colours[upper, columns]) * np.float32(0.5)
+
+
+def majority_median(colours: np.ndarray, values: np.ndarray, valid: np.ndarray, variance_threshold: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eqs. 20-22 on a strict majority: per column of ``colours`` (n, m, 3) with intensities ``values`` (n, m) and
+    ``valid`` (n, m), the tightest run of k = count // 2 + 1 samples in intensity order (the majority whose eq. 20
+    variance is lowest), accepted where that variance is below ``variance_threshold``, with eq. 22's median of the
+    run as the colour (an observed colour; the mean of the two middle ones for an even k).
+
+    Why: where an object passed in front of the background in a few neighbours, eq. 20 over all of them rejects a
+    pixel the others agree on. Returns (ok (m,) bool: three or more samples and such a majority, median (m, 3),
+    member (n, m) bool: the samples in the run)."""
+    n, m = values.shape
+    count = valid.sum(axis=0)
+    order = np.argsort(np.where(valid, values, np.inf), axis=0, kind="stable")
+    ordered = np.where(np.arange(n)[:, None] < count, np.take_along_axis(values, order, axis=0), 0).astype(np.float64)
+    first = np.vstack([np.zeros((1, m)), np.cumsum(ordered, axis=0)])  # prefix sums of the ordered intensities
+    second = np.vstack([np.zeros((1, m)), np.cumsum(ordered ** 2, axis=0)])  # and of their squares
+    k = count // 2 + 1
+    columns = np.arange(m)
+    best = np.full(m, np.inf)
+    start = np.zeros(m, np.int64)
+    for s in range(n):
+        end = np.minimum(s + k, n)
+        total = first[end, columns] - first[s, columns]
+        variance = (second[end, columns] - second[s, columns] - total ** 2 / k) / np.maximum(k - 1, 1)
+        better = (s + k <= count) & (variance < best)
+        best = np.where(better, variance, best)
+        start = np.where(better, s, start)
+    ok = (count >= 3) & (best < variance_threshold)
+    last = np.minimum(start + k - 1, n - 1)
+    lower = order[np.minimum(start + (k - 1) // 2, n - 1), columns]
+    upper = order[np.minimum(start + k // 2, n - 1), columns]
+    median = _middle(colours, lower, upper)
+    rank = np.argsort(order, axis=0)  # each sample's place in intensity order
+    member = valid & (rank >= start) & (rank <= last) & ok
+    return ok, median, member
