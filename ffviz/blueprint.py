@@ -40,7 +40,8 @@ TAB_NOTES = {
         "**Local flow** (eq. 23) between a neighbour and the frame over their common area, **motion "
         "inpainting** of that flow into the missing area by Fast Marching (eq. 24, visiting order and arrival "
         "time T) and **local-warp mosaicing** (eq. 25): which neighbour filled each pixel (filled by) and how "
-        "(filled how): its local warp, its moving content carried on by a frame, or its sample as it is."),
+        "(filled how): its local warp, its moving content carried on by a frame, its sample as it is, or the "
+        "median of the neighbours' majority where a passing object made a few of them disagree."),
     "deblurring": ("**Deblurring** (thesis ch. 5): relative blurriness b_t (eq. 28: one over the gradient "
                    "energy, higher is blurrier); a blurrier frame takes pixels from sharper aligned neighbours, "
                    "weighted by eqs. 30-31. Before / after show only frames that were sharpened."),
