@@ -81,7 +81,7 @@ COMPLETION_FILLED_BY = "completion/filled_by"
 COMPLETION_FALLBACK = "completion/fallback"
 COMPLETION_SOURCE = "completion/source"  # how each pixel was filled: CompletionResult.source's classes
 COMPLETION_FRAME = "completion/frame"
-COMPLETION_STATS = "completion/stats"  # /{missing,mosaic,local_warp,fallback,carried_on,neighbour_as_is}: share of the frame
+COMPLETION_STATS = "completion/stats"  # /missing and /<each completion.SOURCE_NAMES but original>: share of the frame
 
 DEBLUR_BLURRINESS = "deblur/blurriness"  # b_t (eq. 28), every frame
 DEBLUR_NEIGHBOURS = "deblur/neighbours"  # how many sharper neighbours were interpolated from (eq. 30)

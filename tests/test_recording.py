@@ -32,6 +32,8 @@ from pipeline.stabilize import StabilizeConfig, stabilize
 N_FRAMES = 30
 TRACED = (5, 18)
 STAGES = ("motion", "smoothing", "input", "warp", "completion", "deblur", "output")
+# completion/stats: the missing share and one series per way of filling (completion.SOURCE_NAMES after "original")
+COMPLETION_SERIES = tuple(f"{ent.COMPLETION_STATS}/{name.replace(' ', '_')}" for name in ("missing", *SOURCE_NAMES[1:]))
 PER_FRAME_IMAGES = (ent.INPUT_FRAME, ent.STABILIZED_FRAME, ent.STABILIZED_MISSING, ent.COMPLETION_FRAME,
                     ent.COMPLETION_VARIANCE, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY,
                     ent.COMPLETION_FALLBACK, ent.COMPLETION_SOURCE, ent.OUTPUT_FRAME)
@@ -73,7 +75,7 @@ def test_every_family_has_one_row_per_frame_on_both_timelines(full_run):
     series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
     series += [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)
                for axis in ent.TRAJECTORY_AXES]
-    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback", "carried_on", "neighbour_as_is")]
+    series += list(COMPLETION_SERIES)
     for entity in series:
         assert recording.scalars(entity)[0].tolist() == frames, entity
     motion = by_frame(collector, "motion")
@@ -710,7 +712,7 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
     series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
     paths = (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)
     series += [f"{root}/{axis}" for root in paths for axis in ent.TRAJECTORY_AXES]
-    series += [f"{ent.COMPLETION_STATS}/{name}" for name in ("missing", "mosaic", "local_warp", "fallback", "carried_on", "neighbour_as_is")]
+    series += list(COMPLETION_SERIES)
     series += [ent.DEBLUR_BLURRINESS, ent.DEBLUR_NEIGHBOURS, ent.DEBLUR_REFUSED]
     styles = {}
     for entity in series:
@@ -720,7 +722,7 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
         assert names and colours, f"{entity}: no SeriesLines style"
         styles[entity] = (names[0], colours[0])
     # Lines drawn in one chart never share a colour.
-    charts = [[f"{ent.COMPLETION_STATS}/{n}" for n in ("missing", "mosaic", "local_warp", "fallback", "carried_on", "neighbour_as_is")],
+    charts = [list(COMPLETION_SERIES),
               [f"{ent.MOTION_PARAMS}/{n}" for n in ent.MOTION_PARAM_NAMES],
               [f"{root}/{axis}" for root in paths for axis in ("x", "y")],
               [f"{root}/angle" for root in paths]]
