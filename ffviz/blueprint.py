@@ -41,7 +41,9 @@ TAB_NOTES = {
         "inpainting** of that flow into the missing area by Fast Marching (eq. 24, visiting order and arrival "
         "time T) and **local-warp mosaicing** (eq. 25): which neighbour filled each pixel (filled by) and how "
         "(filled how): its local warp, its moving content carried on by a frame, its sample as it is, or the "
-        "median of the neighbours' majority where a passing object made a few of them disagree."),
+        "median of the neighbours' majority where a passing object made a few of them disagree. Last, each "
+        "synthesized pixel is averaged with the same scene point in the completed frames next to it where they "
+        "agree (temporal consistency: its share is the white line of the mosaic tab's chart)."),
     "deblurring": ("**Deblurring** (thesis ch. 5): relative blurriness b_t (eq. 28: one over the gradient "
                    "energy, higher is blurrier); a blurrier frame takes pixels from sharper aligned neighbours, "
                    "weighted by eqs. 30-31. Before / after show only frames that were sharpened."),
@@ -169,7 +171,7 @@ def mosaic_tab() -> rrb.Container:
                          _key("accepted", "mosaic"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
-            rrb.TimeSeriesView(name="share of the frame: missing / mosaic / local warp / fallback",
+            rrb.TimeSeriesView(name="share of the frame: missing / mosaic / local warp / fallback; averaged in",
                                origin=f"/{ent.COMPLETION_STATS}"),
             _note("mosaic"),
             column_shares=[2, 1],

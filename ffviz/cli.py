@@ -196,9 +196,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                    help="full: missing areas completed from neighbouring frames (full frame, no crop); "
                         "crop: largest window valid in every frame, scaled back to full size; "
                         "none: missing areas left black (default: %(default)s)")
-    p.add_argument("--smoothing-radius", "-k", type=int, default=smoothing.DEFAULT_RADIUS, metavar="K",
+    p.add_argument("--smoothing-radius", "-k", type=int, default=None, metavar="K",
                    help="smoothing radius: frames on each side averaged into each frame's camera path (eq. 18); "
-                        "larger is steadier but needs more completion or crop (default: %(default)s)")
+                        "larger is steadier but needs more completion or crop (default: "
+                        + ", ".join(f"{k} in {mode} mode" for mode, k in stab.DEFAULT_RADII.items()) + ")")
     p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
                    help="width of that Gaussian, in frames (default: sqrt(K))")
     p.add_argument("--path", choices=smoothing.PATHS, default=None,
@@ -218,7 +219,7 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--smoothness", default=None, metavar="S|t=S,r=S,z=S",
                    help="how smooth the camera path is, 0-100: 0 follows the input, 50 is the default path, 100 the "
                         "smoothest; one S for every axis or per axis (t translation, r rotation, z zoom; left out: "
-                        "50); gaussian: radius 30 (S/50)^2 per axis instead of -k; l1: its margins times S/50 "
+                        "50); gaussian: radius K (S/50)^2 per axis, K the mode's default -k; l1: its margins times S/50 "
                         "(default: -k, or l1's margins)")
     p.add_argument("--max-shift", type=float, default=None, metavar="PX",
                    help="no output frame's centre lies further than PX pixels (x and y each) from its input frame's, "

@@ -82,6 +82,9 @@ COMPLETION_FALLBACK = "completion/fallback"
 COMPLETION_SOURCE = "completion/source"  # how each pixel was filled: CompletionResult.source's classes
 COMPLETION_FRAME = "completion/frame"
 COMPLETION_STATS = "completion/stats"  # /missing and /<each completion.SOURCE_NAMES but original>: share of the frame
+# The mean share of the synthesized pixels' values averaged in from the neighbouring completed frames (temporal
+# consistency, pipeline/stages/temporal.py), in the same chart
+COMPLETION_TEMPORAL = f"{COMPLETION_STATS}/temporal"
 
 DEBLUR_BLURRINESS = "deblur/blurriness"  # b_t (eq. 28), every frame
 DEBLUR_NEIGHBOURS = "deblur/neighbours"  # how many sharper neighbours were interpolated from (eq. 30)

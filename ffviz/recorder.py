@@ -195,7 +195,13 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "warp": Nested("WarpResult"),
         "completion": Nested("CompletionResult"),
         "deblur": Nested("DeblurResult"),
+        "temporal": Nested("TemporalResult"),
         "cpu_seconds": NotRecorded("per-stage CPU time, for ffviz bench --profile"),
+    },
+    "TemporalResult": {
+        "frame": NotRecorded("the output before deblurring's change to the synthesized pixels; the output is recorded"),
+        "share": (ent.COMPLETION_TEMPORAL,),  # its mean over the synthesized pixels
+        "neighbours": NotRecorded("always t-r..t+r of the same shot; the share says how much they gave"),
     },
     "Stamp": {"index": (ent.FRAME_TIMELINE,), "time_s": (ent.VIDEO_TIME_TIMELINE,)},
     "Frame": {
@@ -537,7 +543,9 @@ class RerunRecorder:
                   f"{ent.COMPLETION_STATS}/fallback": ("fallback", (255, 200, 0)),
                   f"{ent.COMPLETION_STATS}/carried_on": ("carried on (moving content)", (230, 60, 200)),
                   f"{ent.COMPLETION_STATS}/neighbour_as_is": ("neighbour as is", (150, 110, 60)),
-                  f"{ent.COMPLETION_STATS}/majority": ("neighbours' majority", (0, 200, 200))}
+                  f"{ent.COMPLETION_STATS}/majority": ("neighbours' majority", (0, 200, 200)),
+                  ent.COMPLETION_TEMPORAL: ("averaged in from the frames next to it (share of the synthesized value)",
+                                            (235, 235, 235))}
         for entity, (name, colour) in styles.items():
             self.rec.log(entity, rr.SeriesLines(names=name, colors=[colour], widths=2.0), static=True)
         self.rec.log(ent.DEBLUR_REFUSED, rr.SeriesLines(names="a neighbour refused (share)", colors=[(230, 40, 60)]),
@@ -775,6 +783,11 @@ class RerunRecorder:
             self._on_completion(stamp, result.completion)
         if result.deblur is not None:
             self._on_deblur(stamp, result.deblur)
+        if result.temporal is not None and result.completion is not None:
+            missing = result.completion.missing
+            self._set_time(stamp)
+            self.rec.log(ent.COMPLETION_TEMPORAL,
+                         rr.Scalars(float(result.temporal.share[missing].mean()) if missing.any() else 0.0))
         self._on_output(stamp, result.output)
 
     def _on_smoothing(self, result: SmoothingResult) -> None:

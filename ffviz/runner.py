@@ -35,13 +35,13 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ConfigError(f"--workers must be at least 1, not {args.workers}")
     if getattr(args, "tripod", False) and getattr(args, "path", None) not in (None, "gaussian", "tripod"):
         raise ConfigError(f"--tripod holds the camera still; it cannot be combined with --path {args.path}")
-    if args.smoothing_radius > MAX_RADIUS:
+    if args.smoothing_radius is not None and args.smoothing_radius > MAX_RADIUS:
         raise ConfigError(f"-k must be at most {MAX_RADIUS}, not {args.smoothing_radius}")
     # Outside these the kernel's sigma**2 underflows (0/0) or overflows; the ends already mean none/uniform.
     if args.smoothing_sigma is not None and not MIN_SIGMA <= args.smoothing_sigma <= MAX_SIGMA:  # False for nan
         raise ConfigError(f"--smoothing-sigma must be between {MIN_SIGMA:g} and {MAX_SIGMA:g} frames, "
                           f"not {args.smoothing_sigma}")
-    if getattr(args, "smoothness", None) is not None and (args.smoothing_radius != smoothing.DEFAULT_RADIUS
+    if getattr(args, "smoothness", None) is not None and (args.smoothing_radius is not None
                                                           or args.smoothing_sigma is not None):
         raise ConfigError("--smoothness sets eq. 18's radius per axis: give it or -k/--smoothing-sigma, not both")
     if getattr(args, "crop", "fixed") != "fixed" and args.mode != "crop":
@@ -74,7 +74,8 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
                                        ignore=tuple(parse_ignore(text) for text in getattr(args, "ignore", [])),
                                        ignore_mask=getattr(args, "ignore_mask", None)),
             smoothing=smoothing.SmoothingConfig(
-                radius_frames=args.smoothing_radius, sigma=args.smoothing_sigma,
+                radius_frames=(stab.DEFAULT_RADII[args.mode] if args.smoothing_radius is None
+                               else args.smoothing_radius), sigma=args.smoothing_sigma,
                 path="tripod" if getattr(args, "tripod", False) else (getattr(args, "path", None)
                                                                        or stab.DEFAULT_PATHS[args.mode]),
                 horizon_lock=getattr(args, "horizon_lock", False),

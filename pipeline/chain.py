@@ -23,7 +23,7 @@ from pipeline.results import FrameResult, MotionPass, PathComparison, PathPlan, 
 from pipeline.runtime import parallel, video_io
 from pipeline.runtime.source import FrameSource, one_pass
 from pipeline.runtime.window import RENDER_SLACK_FRAMES, PerFrame, Windowed, sliding_window
-from pipeline.stages import adaptive_crop, completion, deblur, neighbours, rolling_shutter, smoothing, warping
+from pipeline.stages import adaptive_crop, completion, deblur, neighbours, rolling_shutter, smoothing, temporal, warping
 
 import numpy as np
 
@@ -206,6 +206,8 @@ class FrameChain:
         self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
                                        side="right") - 1
         self.keep = keep_intermediates
+        # full mode's temporal consistency (smoothed_stream) needs each frame's completion whether it is kept or not
+        self.temporal_radius = config.completion.temporal.radius if config.completing else 0
         self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
         self.downscaled: neighbours.Downscaled | None = None  # frames at completion's flow resolution
         # --rolling-shutter: completion and deblurring draw on frames corrected to their middle rows' views
@@ -284,9 +286,48 @@ class FrameChain:
             output = deblurred.frame
         stamp = Stamp(frame.index, frame.time_s)
         if not self.keep:
-            return FrameResult(stamp, frame.pts, output, cpu_seconds=cpu)
+            return FrameResult(stamp, frame.pts, output, completion=completed if self.temporal_radius else None,
+                               cpu_seconds=cpu)
         return FrameResult(stamp, frame.pts, output, input=frame, warp=stabilized, completion=completed,
                            deblur=deblurred, cpu_seconds=cpu)
+
+    def smoothed_stream(self, results: Iterable[FrameResult]) -> Iterator[FrameResult]:
+        """Full mode's last step over the frames in order: each frame's synthesized pixels averaged with its
+        neighbours' completed frames (pipeline/stages/temporal.py), deblurring's change to them kept."""
+        for window in sliding_window(results, self.temporal_radius):
+            yield self._smoothed(window)
+
+    def _smoothed(self, window: Windowed[FrameResult]) -> FrameResult:
+        result = window.centre
+        completed, t = result.completion, result.stamp.index
+        if completed is None or t >= len(self.shot_of):  # (a frame pass 1 did not see has no path to be smoothed on)
+            return result if self.keep else dataclasses.replace(result, completion=None)
+        clock = time.thread_time()
+        others = {n.stamp.index: n.completion for n in window.neighbours.values()
+                  if n.completion is not None and n.stamp.index < len(self.shot_of)
+                  and self.shot_of[n.stamp.index] == self.shot_of[t]}
+        completed_neighbours = []
+        if others:
+            t_from = geometry.neighbour_transforms(self.curr_from_prev, t, min(min(others), t), max(max(others), t))
+            stab_t = self.orig_from_stab[t]
+            completed_neighbours = [temporal.CompletedNeighbour(j - t, others[j].frame,
+                                                       np.linalg.inv(self.orig_from_stab[j])
+                                                       @ np.linalg.inv(t_from[j]) @ stab_t, others[j].missing)
+                           for j in sorted(others, key=lambda j: (abs(j - t), j))]
+        smoothed = temporal.smooth(completed.frame, completed.missing, completed_neighbours,
+                                   self.config.completion.temporal)
+        output = result.output
+        if smoothed.neighbours:
+            # The output is the completed frame after deblurring: the synthesized pixels take the average plus
+            # deblurring's change to them (none where deblurring did not run).
+            synthesized = completed.missing
+            change = smoothed.frame[synthesized].astype(np.int16) - completed.frame[synthesized]
+            output = output.copy()
+            output[synthesized] = np.clip(result.output[synthesized] + change, 0, 255).astype(np.uint8)
+        cpu = {**result.cpu_seconds, "temporal": time.thread_time() - clock}
+        if not self.keep:
+            return FrameResult(result.stamp, result.pts, output, cpu_seconds=cpu)
+        return dataclasses.replace(result, output=output, temporal=smoothed, cpu_seconds=cpu)
 
 
 def render_frames(source: FrameSource, plan: PathPlan, config: StabilizeConfig, *, keep_intermediates: bool,
@@ -294,11 +335,19 @@ def render_frames(source: FrameSource, plan: PathPlan, config: StabilizeConfig, 
     """Pass 2: every frame's result, in frame order (``workers`` frames at once on threads; identical either way).
 
     ``frames``: only these (a segment); the window still reads ``config.window_frames`` frames either side of the
-    range, so each frame sees the neighbours it sees in a whole-video run."""
+    range, and the frames temporal consistency averages in are rendered too (not returned), so each frame is what
+    it is in a whole-video run."""
     chain = FrameChain(plan, config, keep_intermediates=keep_intermediates)
+    margin = chain.temporal_radius
     with one_pass(source) as decoded:
         windows: Iterable[Windowed[video_io.Frame]] = sliding_window(decoded, config.window_frames)
         if frames is not None:
-            windows = (w for w in itertools.takewhile(lambda w: w.centre.index < frames.stop, windows)
-                       if w.centre.index >= frames.start)
-        yield from parallel.ordered_map(chain, windows, workers)
+            first, stop = frames.start - margin, frames.stop + margin
+            windows = (w for w in itertools.takewhile(lambda w: w.centre.index < stop, windows)
+                       if w.centre.index >= first)
+        results: Iterable[FrameResult] = parallel.ordered_map(chain, windows, workers)
+        if margin:
+            results = chain.smoothed_stream(results)
+            if frames is not None:
+                results = (r for r in results if frames.start <= r.stamp.index < frames.stop)
+        yield from results

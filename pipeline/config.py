@@ -17,13 +17,17 @@ OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
 # frame); full and none: eq. 18, since the L1 path's wider departures leave completion more to fill
 # (docs/decisions.md, 2026-11-25).
 DEFAULT_PATHS = {"full": "gaussian", "none": "gaussian", "crop": "auto"}
+# Eq. 18's radius k by mode. Full mode (and none, its warp without completion) at 60: steadier than vid.stab's
+# cropped output on every shared clip, its wider missing area kept from flickering by completion's temporal
+# consistency; crop mode at 30, where a larger k only shrinks the window (docs/decisions.md 2026-11-27).
+DEFAULT_RADII = {"full": 60, "none": 60, "crop": smoothing.DEFAULT_RADIUS}
 
 
 @dataclass(frozen=True)
 class StabilizeConfig:
     mode: OutputMode = "full"
     motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
-    # None: the mode's DEFAULT_PATHS path with its defaults (set here, so the config always holds one)
+    # None: the mode's DEFAULT_PATHS path at its DEFAULT_RADII radius (set here, so the config always holds one)
     smoothing: smoothing.SmoothingConfig = None  # type: ignore[assignment]
     completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
     deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
@@ -35,7 +39,8 @@ class StabilizeConfig:
         if self.mode not in OUTPUT_MODES:
             raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
         if self.smoothing is None:
-            object.__setattr__(self, "smoothing", smoothing.SmoothingConfig(path=DEFAULT_PATHS[self.mode]))
+            object.__setattr__(self, "smoothing", smoothing.SmoothingConfig(path=DEFAULT_PATHS[self.mode],
+                                                                           radius_frames=DEFAULT_RADII[self.mode]))
         if self.crop.scale is not None and not (self.mode == "crop" and self.smoothing.uses_l1):
             raise ConfigError("--crop-scale needs --mode crop and the l1 or tripod path (it is the L1 program's "
                               "crop-window constraint)")

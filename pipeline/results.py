@@ -20,6 +20,7 @@ from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages.deblur import DeblurResult
 from pipeline.stages.rolling_shutter import Correction, Tracks
 from pipeline.stages.smoothing import SmoothingResult
+from pipeline.stages.temporal import TemporalResult
 from pipeline.stages.warping import CropWindow, WarpResult
 
 
@@ -95,4 +96,7 @@ class FrameResult:
     warp: WarpResult | None = None  # the stabilized frame and its missing pixels (built in crop mode only when kept)
     completion: CompletionResult | None = None  # full mode
     deblur: DeblurResult | None = None  # where deblurring runs
+    # full mode: the synthesized pixels averaged with the neighbouring completed frames (the output has them, with
+    # deblurring's change added)
+    temporal: TemporalResult | None = None
     cpu_seconds: dict[str, float] = field(default_factory=dict)  # this thread's CPU time per stage

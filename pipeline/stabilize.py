@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from pipeline.chain import FrameChain, plan_path, render_frames
-from pipeline.config import DEFAULT_PATHS, OUTPUT_MODES, OutputMode, StabilizeConfig
+from pipeline.config import DEFAULT_PATHS, DEFAULT_RADII, OUTPUT_MODES, OutputMode, StabilizeConfig
 from pipeline.errors import ConfigError, InputError
 from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
 from pipeline.runtime import parallel, video_io
@@ -25,7 +25,7 @@ from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, o
 from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages import motion, rolling_shutter, warping
 
-__all__ = ["DEFAULT_PATHS", "OUTPUT_MODES", "OutputMode", "StabilizeConfig", "MotionPass", "PathPlan", "FrameResult",
+__all__ = ["DEFAULT_PATHS", "DEFAULT_RADII", "OUTPUT_MODES", "OutputMode", "StabilizeConfig", "MotionPass", "PathPlan", "FrameResult",
            "FrameChain", "StabilizeReport", "estimate_motion", "run_passes", "stabilize", "stabilize_source"]
 
 

@@ -181,12 +181,14 @@ def test_flat_windows_take_no_other_flat_surface():
 def test_completion_holds_5_db_over_the_opencv_chain_where_the_figure_passed_in_the_nearest_neighbours():
     """Issue 20's bar on the two person clips where a strip the figure has left, still shown by the nearest frames,
     held the margin under 5 dB: the median of the neighbours' majority competes with the local warps there.
-    Measured coffee +6.52 / rocket +5.51 dB; without the majority candidate +4.63 / +4.30."""
+    Measured coffee +7.21 / rocket +5.83 dB; without the majority candidate +5.41 / +4.83 (at k = 30 and before
+    temporal consistency, +4.63 / +4.30): the candidate's own gain on coffee is 1.8 dB."""
     coffee, rocket = person_clip("coffee", 1), person_clip("rocket", 6, sweep=0.8)
-    for video in (coffee, rocket):
-        scores = dynamic_scores(video)
-        assert scores.synthesized_psnr >= scores.mosaic_telea_psnr + 5.0
+    scores = {}
+    for name, video in (("coffee", coffee), ("rocket", rocket)):
+        scores[name] = dynamic_scores(video)
+        assert scores[name].synthesized_psnr >= scores[name].mosaic_telea_psnr + 5.0, name
     config = StabilizeConfig()
     without = dataclasses.replace(config, completion=dataclasses.replace(config.completion, majority_candidate=False))
     before = dynamic_scores(coffee, without)
-    assert before.synthesized_psnr < before.mosaic_telea_psnr + 5.0
+    assert scores["coffee"].synthesized_psnr >= before.synthesized_psnr + 1.0

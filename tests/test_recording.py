@@ -34,6 +34,7 @@ TRACED = (5, 18)
 STAGES = ("motion", "smoothing", "input", "warp", "completion", "deblur", "output")
 # completion/stats: the missing share and one series per way of filling (completion.SOURCE_NAMES after "original")
 COMPLETION_SERIES = tuple(f"{ent.COMPLETION_STATS}/{name.replace(' ', '_')}" for name in ("missing", *SOURCE_NAMES[1:]))
+COMPLETION_SERIES += (ent.COMPLETION_TEMPORAL,)  # and, in the same chart, how much temporal consistency averaged in
 PER_FRAME_IMAGES = (ent.INPUT_FRAME, ent.STABILIZED_FRAME, ent.STABILIZED_MISSING, ent.COMPLETION_FRAME,
                     ent.COMPLETION_VARIANCE, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY,
                     ent.COMPLETION_FALLBACK, ent.COMPLETION_SOURCE, ent.OUTPUT_FRAME)
@@ -635,7 +636,7 @@ def test_about_tab_is_a_readable_summary(compact_run):
     assert meta.startswith("# About this recording")
     assert "## Settings" in meta and "**smoothing**" in meta.split("## All settings")[1]
     settings = meta.split("## Settings")[1].split("##")[0]
-    assert "- mode: full frame" in settings and "k = 30 frames" in settings
+    assert "- mode: full frame" in settings and "k = 60 frames" in settings
     assert "- changed from the defaults: nothing" in settings  # the fixture runs StabilizeConfig(mode="full")
     assert f"- warnings: {len(collector.warnings)}" in meta
     assert "frames in" in meta and "render pass" in meta

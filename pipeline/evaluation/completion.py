@@ -92,9 +92,9 @@ class _CompletionJudge(NullObserver):
     def on_frame(self, result: FrameResult) -> None:
         if result.completion is None or (self.frames is not None and result.stamp.index not in self.frames):
             return
-        self._score(result.stamp.index, result.warp, result.completion)
+        self._score(result.stamp.index, result.warp, result.completion, completed_frame(result))
 
-    def _score(self, t: int, warped: warping.WarpResult, completed) -> None:
+    def _score(self, t: int, warped: warping.WarpResult, completed, ours: np.ndarray) -> None:
         missing = completed.missing
         if not missing.any():
             return
@@ -103,7 +103,7 @@ class _CompletionJudge(NullObserver):
         if not judged.any():
             return
         candidates = {
-            "ours": completed.frame,
+            "ours": ours,
             "mosaic+telea": mosaic_telea(completed),
             "telea": cv2.inpaint(warped.frame, missing.astype(np.uint8), TELEA_RADIUS, cv2.INPAINT_TELEA),
         }
@@ -118,6 +118,11 @@ class _CompletionJudge(NullObserver):
                 self.scores._add(t, name, {m: float(e[part].sum()) for m, e in errors.items()}, int(part.sum()))
         self.scores.pixels += int(judged.sum())
         self.scores.frames += 1
+
+
+def completed_frame(result: FrameResult) -> np.ndarray:
+    """Full mode's completed frame as the output has it (before deblurring): temporal consistency's where it ran."""
+    return result.temporal.frame if result.temporal is not None else result.completion.frame
 
 
 def mosaic_telea(completed) -> np.ndarray:
@@ -276,9 +281,9 @@ class _DynamicJudge(NullObserver):
 
     def on_frame(self, result: FrameResult) -> None:
         if result.deblur is not None:
-            self._score(result.stamp.index, result.warp, result.completion, result.deblur)
+            self._score(result.stamp.index, result.warp, result.completion, result.deblur, completed_frame(result))
 
-    def _score(self, t: int, warped: warping.WarpResult, completed, deblurred) -> None:
+    def _score(self, t: int, warped: warping.WarpResult, completed, deblurred, ours: np.ndarray) -> None:
         video = self.video
         out_from_orig = np.linalg.inv(warped.orig_from_out)
         truth = video.render_view(t, out_from_orig)
@@ -298,11 +303,11 @@ class _DynamicJudge(NullObserver):
             self.show[name].add_correlation(_high_pass(image, sigma), hidden_high, inside)
         synthesized = completed.missing & covered
         if synthesized.any():
-            for name, image in (("ours", completed.frame), ("mosaic+telea", mosaic_telea(completed))):
+            for name, image in (("ours", ours), ("mosaic+telea", mosaic_telea(completed))):
                 self.synthesized[name].add_error(image, truth, synthesized)
                 self.synthesized_on[name]["object"].add_error(image, truth, synthesized & inside)
                 self.synthesized_on[name]["background"].add_error(image, truth, synthesized & ~inside)
-            self.synthesized_show.add_correlation(_high_pass(completed.frame, sigma), hidden_high,
+            self.synthesized_show.add_correlation(_high_pass(ours, sigma), hidden_high,
                                                   synthesized & inside)
 
     def scores(self) -> DynamicScores:

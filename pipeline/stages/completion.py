@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from pipeline.stages import fallback, fmm, local_flow, mosaic, registration
+from pipeline.stages import fallback, fmm, local_flow, mosaic, registration, temporal
 from pipeline import geometry, imaging
 from pipeline.errors import ConfigError
 from pipeline.stages.neighbours import WarpedNeighbour, remap_points, shrink, shrink_all, shrink_any
@@ -123,6 +123,9 @@ class CompletionConfig:
     mosaic: mosaic.MosaicConfig = field(default_factory=mosaic.MosaicConfig)
     flow: local_flow.LocalFlowConfig = field(default_factory=local_flow.LocalFlowConfig)
     inpaint: fmm.MotionInpaintConfig = field(default_factory=fmm.MotionInpaintConfig)
+    # After every frame is completed: its synthesized pixels averaged with the completed frames next to it where they
+    # agree (pipeline/stages/temporal.py; run over the stream of frames by pipeline/chain.py).
+    temporal: temporal.TemporalConfig = field(default_factory=temporal.TemporalConfig)
 
     def __post_init__(self) -> None:
         if self.neighbour_frames < 0:

@@ -2,8 +2,8 @@
 
 Smoothness: one strength 0-100 per axis (translation, rotation, zoom), as Warp Stabilizer's "Smoothness %" and
 Gyroflow's per-axis smoothness. 50 is the default path; 0 follows the input. On eq. 18's path it sets the radius
-k (sigma = sqrt(k)) of each axis, k = 30 (s / 50)^2; on the L1 path the margin each axis may depart from its
-input, default (s / 50). A larger strength is a larger kernel or a larger feasible set: a smoother path.
+k (sigma = sqrt(k)) of each axis, k = K (s / 50)^2 with K the run's k (the mode's default); on the L1 path the
+margin each axis may depart from its input, default (s / 50). A larger strength is a larger kernel or a larger feasible set: a smoother path.
 
 Departure bound: no output frame's centre moves more than ``max_shift`` px (x and y each) from its input's, nor
 turns more than ``max_angle`` degrees (vid.stab maxshift / maxangle); applied last, on every path.
@@ -24,8 +24,7 @@ import numpy as np
 from pipeline import geometry
 from pipeline.errors import ConfigError
 
-DEFAULT_STRENGTH = 50.0  # the strength of the default path (eq. 18 with k = 30; the L1 path's default margins)
-DEFAULT_RADIUS = 30
+DEFAULT_STRENGTH = 50.0  # the strength of the default path (eq. 18 at the mode's k; the L1 path's default margins)
 BLEND_S = 1.0  # seconds over which a segment's correction eases into the next one's
 AXES = ("translation", "rotation", "zoom")
 _AXIS_KEYS = {"t": "translation", "r": "rotation", "z": "zoom"}
@@ -61,10 +60,10 @@ class Smoothness:
             raise ConfigError(f"smoothness {text!r}: expected a number 0-100 or t=S,r=S,z=S") from None
         return cls(**values)
 
-    def radius(self, axis: str) -> int:
-        """Eq. 18's k for an axis: 30 at strength 50, 0 at 0, 120 at 100 (quadratic: fine control where it is
-        light)."""
-        return int(round(DEFAULT_RADIUS * (getattr(self, axis) / DEFAULT_STRENGTH) ** 2))
+    def radius(self, axis: str, default: int) -> int:
+        """Eq. 18's k for an axis: ``default`` (the run's k without --smoothness) at strength 50, 0 at 0, four times
+        ``default`` at 100 (quadratic: fine control where it is light)."""
+        return int(round(default * (getattr(self, axis) / DEFAULT_STRENGTH) ** 2))
 
     def margin_factor(self, axis: str) -> float:
         """The L1 path's margin for an axis, as a multiple of its default: 1 at strength 50, 0 at 0, 2 at 100."""

@@ -23,7 +23,9 @@ from pipeline.geometry import neighbour_transforms
 from pipeline.stages import l1_path, path_control
 from pipeline.errors import ConfigError
 
-DEFAULT_RADIUS = 30  # chosen from measurements on the real clips: see docs/how-it-works.md, "Choosing k"
+# k when none is given: crop mode's (full mode's is pipeline/config.DEFAULT_RADII's), chosen from measurements on the
+# real clips: docs/how-it-works.md, "Choosing k"
+DEFAULT_RADIUS = 30
 
 
 PATHS = ("gaussian", "l1", "tripod", "auto")
@@ -198,20 +200,21 @@ def _plan_range(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: i
         planner = config.l1_planner(max(width, 1), max(height, 1))
         return _l1_path(curr_from_prev, first, last, planner, width, height)
     if config.smoothness is None or config.smoothness.uniform:
-        radius = config.radius_frames if config.smoothness is None else config.smoothness.radius("translation")
+        radius = (config.radius_frames if config.smoothness is None
+                  else config.smoothness.radius("translation", config.radius_frames))
         sigma = config.effective_sigma if config.smoothness is None else max(math.sqrt(radius), 1e-6)
         return _gaussian(curr_from_prev, prev_from_curr, first, last, radius, sigma)
     # Per axis: eq. 18 at each axis's radius; the translation run's S_t turned and zoomed about the output centre
     # (which it sends to the same place) to the rotation and zoom runs' angle and scale.
     by_axis = {}
     for axis in path_control.AXES:
-        radius = config.smoothness.radius(axis)
+        radius = config.smoothness.radius(axis, config.radius_frames)
         if radius not in by_axis:
             by_axis[radius] = _gaussian(curr_from_prev, prev_from_curr, first, last, radius,
                                         max(math.sqrt(radius), 1e-6))
-    moved = by_axis[config.smoothness.radius("translation")]
-    turned = by_axis[config.smoothness.radius("rotation")]
-    zoomed = by_axis[config.smoothness.radius("zoom")]
+    moved = by_axis[config.smoothness.radius("translation", config.radius_frames)]
+    turned = by_axis[config.smoothness.radius("rotation", config.radius_frames)]
+    zoomed = by_axis[config.smoothness.radius("zoom", config.radius_frames)]
     out = np.empty_like(moved)
     for i in range(len(moved)):
         _, _, angle, scale = geometry.decompose(moved[i], width, height)
