@@ -29,8 +29,8 @@ TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within t
 
 
 def remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray,
-                 border_mode: int = cv2.BORDER_CONSTANT) -> np.ndarray:
-    """Bilinear samples of ``image`` at points (x, y) (float arrays of one size m): (m, channels).
+                 border_mode: int = cv2.BORDER_CONSTANT, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+    """Samples of ``image`` at points (x, y) (float arrays of one size m), bilinear unless told: (m, channels).
 
     cv2.remap wants its points as a 2-D map whose sides stay below 32767: they are laid out in rows of at
     most 4096 (the last row padded, its samples dropped)."""
@@ -50,7 +50,7 @@ def remap_points(image: np.ndarray, x: np.ndarray, y: np.ndarray,
         padded[:count] = values
         return padded.reshape(rows, columns)
 
-    sampled = cv2.remap(image, as_map(x), as_map(y), cv2.INTER_LINEAR, borderMode=border_mode)
+    sampled = cv2.remap(image, as_map(x), as_map(y), interpolation, borderMode=border_mode)
     return sampled.reshape(-1, channels)[:count]
 
 

