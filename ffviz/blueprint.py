@@ -43,7 +43,7 @@ TAB_NOTES = {
         "(filled how): its local warp, its moving content carried on by a frame, its sample as it is, or the "
         "median of the neighbours' majority where a passing object made a few of them disagree. Last, each "
         "synthesized pixel is averaged with the same scene point in the completed frames next to it where they "
-        "agree (temporal consistency: its share is the white line of the mosaic tab's chart)."),
+        "agree (temporal consistency: how much, charted under the completed frame)."),
     "deblurring": ("**Deblurring** (thesis ch. 5): relative blurriness b_t (eq. 28: one over the gradient "
                    "energy, higher is blurrier); a blurrier frame takes pixels from sharper aligned neighbours, "
                    "weighted by eqs. 30-31. Before / after show only frames that were sharpened."),
@@ -171,7 +171,7 @@ def mosaic_tab() -> rrb.Container:
                          _key("accepted", "mosaic"), row_shares=[4, 1]),
         ),
         rrb.Horizontal(
-            rrb.TimeSeriesView(name="share of the frame: missing / mosaic / local warp / fallback; averaged in",
+            rrb.TimeSeriesView(name="share of the frame: missing / mosaic / local warp / fallback",
                                origin=f"/{ent.COMPLETION_STATS}"),
             _note("mosaic"),
             column_shares=[2, 1],
@@ -194,7 +194,9 @@ def inpainting_tab() -> rrb.Container:
         rrb.Horizontal(
             _image("filled by (eq. 25)", ent.COMPLETION_FRAME, ent.COMPLETION_FILLED_BY),
             _image("filled how", ent.COMPLETION_FRAME, ent.COMPLETION_SOURCE),
-            _image("completed", ent.COMPLETION_FRAME),
+            rrb.Vertical(_image("completed", ent.COMPLETION_FRAME),
+                         rrb.TimeSeriesView(name="temporal consistency",
+                                            origin=f"/{ent.COMPLETION_TEMPORAL}"), row_shares=[2, 1]),
             rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by"), _key("source", "filled how")),
             _note("local flow + motion inpainting"),
         ),

@@ -544,7 +544,7 @@ class RerunRecorder:
                   f"{ent.COMPLETION_STATS}/carried_on": ("carried on (moving content)", (230, 60, 200)),
                   f"{ent.COMPLETION_STATS}/neighbour_as_is": ("neighbour as is", (150, 110, 60)),
                   f"{ent.COMPLETION_STATS}/majority": ("neighbours' majority", (0, 200, 200)),
-                  ent.COMPLETION_TEMPORAL: ("averaged in from the frames next to it (share of the synthesized value)",
+                  ent.COMPLETION_TEMPORAL: ("share averaged in",
                                             (235, 235, 235))}
         for entity, (name, colour) in styles.items():
             self.rec.log(entity, rr.SeriesLines(names=name, colors=[colour], widths=2.0), static=True)

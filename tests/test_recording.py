@@ -34,7 +34,6 @@ TRACED = (5, 18)
 STAGES = ("motion", "smoothing", "input", "warp", "completion", "deblur", "output")
 # completion/stats: the missing share and one series per way of filling (completion.SOURCE_NAMES after "original")
 COMPLETION_SERIES = tuple(f"{ent.COMPLETION_STATS}/{name.replace(' ', '_')}" for name in ("missing", *SOURCE_NAMES[1:]))
-COMPLETION_SERIES += (ent.COMPLETION_TEMPORAL,)  # and, in the same chart, how much temporal consistency averaged in
 PER_FRAME_IMAGES = (ent.INPUT_FRAME, ent.STABILIZED_FRAME, ent.STABILIZED_MISSING, ent.COMPLETION_FRAME,
                     ent.COMPLETION_VARIANCE, ent.COMPLETION_ACCEPTED, ent.COMPLETION_FILLED_BY,
                     ent.COMPLETION_FALLBACK, ent.COMPLETION_SOURCE, ent.OUTPUT_FRAME)
@@ -76,7 +75,7 @@ def test_every_family_has_one_row_per_frame_on_both_timelines(full_run):
     series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
     series += [f"{root}/{axis}" for root in (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED)
                for axis in ent.TRAJECTORY_AXES]
-    series += list(COMPLETION_SERIES)
+    series += [*COMPLETION_SERIES, ent.COMPLETION_TEMPORAL]
     for entity in series:
         assert recording.scalars(entity)[0].tolist() == frames, entity
     motion = by_frame(collector, "motion")
@@ -713,7 +712,7 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
     series += [ent.MOTION_INLIERS, ent.MOTION_INLIER_RATIO, ent.MOTION_RESIDUAL]
     paths = (ent.TRAJECTORY_ORIGINAL, ent.TRAJECTORY_SMOOTHED, ent.TRAJECTORY_GAUSSIAN, ent.TRAJECTORY_L1)
     series += [f"{root}/{axis}" for root in paths for axis in ent.TRAJECTORY_AXES]
-    series += list(COMPLETION_SERIES)
+    series += [*COMPLETION_SERIES, ent.COMPLETION_TEMPORAL]
     series += [ent.DEBLUR_BLURRINESS, ent.DEBLUR_NEIGHBOURS, ent.DEBLUR_REFUSED]
     styles = {}
     for entity in series:
