@@ -196,7 +196,12 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "completion": Nested("CompletionResult"),
         "deblur": Nested("DeblurResult"),
         "temporal": Nested("TemporalResult"),
+        "completed": Nested("CompletedFrame"),
         "cpu_seconds": NotRecorded("per-stage CPU time, for ffviz bench --profile"),
+    },
+    "CompletedFrame": {  # held for temporal consistency only, dropped before the recorder sees it
+        "frame": NotRecorded("completion's frame, recorded as CompletionResult.frame"),
+        "synthesized": NotRecorded("completion's missing pixels, recorded as CompletionResult.missing"),
     },
     "TemporalResult": {
         "frame": NotRecorded("the output before deblurring's change to the synthesized pixels; the output is recorded"),

@@ -285,11 +285,12 @@ class FrameChain:
             lap("deblur")
             output = deblurred.frame
         stamp = Stamp(frame.index, frame.time_s)
+        held = (temporal.CompletedFrame(completed.frame, completed.missing)
+                if self.temporal_radius and completed is not None else None)
         if not self.keep:
-            return FrameResult(stamp, frame.pts, output, completion=completed if self.temporal_radius else None,
-                               cpu_seconds=cpu)
+            return FrameResult(stamp, frame.pts, output, cpu_seconds=cpu, completed=held)
         return FrameResult(stamp, frame.pts, output, input=frame, warp=stabilized, completion=completed,
-                           deblur=deblurred, cpu_seconds=cpu)
+                           deblur=deblurred, cpu_seconds=cpu, completed=held)
 
     def smoothed_stream(self, results: Iterable[FrameResult]) -> Iterator[FrameResult]:
         """Full mode's last step over the frames in order: each frame's synthesized pixels averaged with its
@@ -299,12 +300,12 @@ class FrameChain:
 
     def _smoothed(self, window: Windowed[FrameResult]) -> FrameResult:
         result = window.centre
-        completed, t = result.completion, result.stamp.index
+        completed, t = result.completed, result.stamp.index
         if completed is None or t >= len(self.shot_of):  # (a frame pass 1 did not see has no path to be smoothed on)
-            return result if self.keep else dataclasses.replace(result, completion=None)
+            return dataclasses.replace(result, completed=None)
         clock = time.thread_time()
-        others = {n.stamp.index: n.completion for n in window.neighbours.values()
-                  if n.completion is not None and n.stamp.index < len(self.shot_of)
+        others = {n.stamp.index: n.completed for n in window.neighbours.values()
+                  if n.completed is not None and n.stamp.index < len(self.shot_of)
                   and self.shot_of[n.stamp.index] == self.shot_of[t]}
         completed_neighbours = []
         if others:
@@ -312,22 +313,22 @@ class FrameChain:
             stab_t = self.orig_from_stab[t]
             completed_neighbours = [temporal.CompletedNeighbour(j - t, others[j].frame,
                                                        np.linalg.inv(self.orig_from_stab[j])
-                                                       @ np.linalg.inv(t_from[j]) @ stab_t, others[j].missing)
+                                                       @ np.linalg.inv(t_from[j]) @ stab_t, others[j].synthesized)
                            for j in sorted(others, key=lambda j: (abs(j - t), j))]
-        smoothed = temporal.smooth(completed.frame, completed.missing, completed_neighbours,
+        smoothed = temporal.smooth(completed.frame, completed.synthesized, completed_neighbours,
                                    self.config.completion.temporal)
         output = result.output
         if smoothed.neighbours:
             # The output is the completed frame after deblurring: the synthesized pixels take the average plus
             # deblurring's change to them (none where deblurring did not run).
-            synthesized = completed.missing
+            synthesized = completed.synthesized
             change = smoothed.frame[synthesized].astype(np.int16) - completed.frame[synthesized]
             output = output.copy()
             output[synthesized] = np.clip(result.output[synthesized] + change, 0, 255).astype(np.uint8)
         cpu = {**result.cpu_seconds, "temporal": time.thread_time() - clock}
         if not self.keep:
             return FrameResult(result.stamp, result.pts, output, cpu_seconds=cpu)
-        return dataclasses.replace(result, output=output, temporal=smoothed, cpu_seconds=cpu)
+        return dataclasses.replace(result, output=output, temporal=smoothed, cpu_seconds=cpu, completed=None)
 
 
 def render_frames(source: FrameSource, plan: PathPlan, config: StabilizeConfig, *, keep_intermediates: bool,

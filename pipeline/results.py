@@ -20,7 +20,7 @@ from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages.deblur import DeblurResult
 from pipeline.stages.rolling_shutter import Correction, Tracks
 from pipeline.stages.smoothing import SmoothingResult
-from pipeline.stages.temporal import TemporalResult
+from pipeline.stages.temporal import CompletedFrame, TemporalResult
 from pipeline.stages.warping import CropWindow, WarpResult
 
 
@@ -99,4 +99,7 @@ class FrameResult:
     # full mode: the synthesized pixels averaged with the neighbouring completed frames (the output has them, with
     # deblurring's change added)
     temporal: TemporalResult | None = None
+    # full mode: completion's frame and its synthesized pixels, held only until the frames next to it are made
+    # temporally consistent (without completion's other intermediates, which a run that does not record drops)
+    completed: CompletedFrame | None = None
     cpu_seconds: dict[str, float] = field(default_factory=dict)  # this thread's CPU time per stage

@@ -49,6 +49,14 @@ class TemporalConfig:
             raise ConfigError(f"temporal sigma must be positive, not {self.sigma}")
 
 
+@dataclass(frozen=True)
+class CompletedFrame:
+    """What temporal consistency needs of one completed frame: the frame and which of its pixels were synthesized."""
+
+    frame: np.ndarray  # (H, W, 3) uint8
+    synthesized: np.ndarray  # (H, W) bool
+
+
 @dataclass
 class TemporalResult:
     frame: np.ndarray  # the completed frame with its synthesized pixels averaged over time (H, W, 3) uint8
