@@ -206,7 +206,8 @@ class FrameChain:
         self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
                                        side="right") - 1
         self.keep = keep_intermediates
-        # full mode's temporal consistency (smoothed_stream) needs each frame's completion whether it is kept or not
+        # full mode's temporal consistency (smoothed_stream) holds each frame's completed frame and mask (FrameResult.
+        # completed) until the frames next to it are made, whether intermediates are kept or not
         self.temporal_radius = config.completion.temporal.radius if config.completing else 0
         self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
         self.downscaled: neighbours.Downscaled | None = None  # frames at completion's flow resolution
@@ -311,10 +312,11 @@ class FrameChain:
         if others:
             t_from = geometry.neighbour_transforms(self.curr_from_prev, t, min(min(others), t), max(max(others), t))
             stab_t = self.orig_from_stab[t]
-            completed_neighbours = [temporal.CompletedNeighbour(j - t, others[j].frame,
-                                                       np.linalg.inv(self.orig_from_stab[j])
-                                                       @ np.linalg.inv(t_from[j]) @ stab_t, others[j].synthesized)
-                           for j in sorted(others, key=lambda j: (abs(j - t), j))]
+            completed_neighbours = [
+                temporal.CompletedNeighbour(j - t, others[j].frame,
+                                            np.linalg.inv(self.orig_from_stab[j]) @ np.linalg.inv(t_from[j]) @ stab_t,
+                                            others[j].synthesized)
+                for j in sorted(others, key=lambda j: (abs(j - t), j))]
         smoothed = temporal.smooth(completed.frame, completed.synthesized, completed_neighbours,
                                    self.config.completion.temporal)
         output = result.output

@@ -206,15 +206,13 @@ def _plan_range(curr_from_prev: np.ndarray, prev_from_curr: np.ndarray, first: i
         return _gaussian(curr_from_prev, prev_from_curr, first, last, radius, sigma)
     # Per axis: eq. 18 at each axis's radius; the translation run's S_t turned and zoomed about the output centre
     # (which it sends to the same place) to the rotation and zoom runs' angle and scale.
+    radius_of = {axis: config.smoothness.radius(axis, config.radius_frames) for axis in path_control.AXES}
     by_axis = {}
-    for axis in path_control.AXES:
-        radius = config.smoothness.radius(axis, config.radius_frames)
+    for radius in radius_of.values():
         if radius not in by_axis:
             by_axis[radius] = _gaussian(curr_from_prev, prev_from_curr, first, last, radius,
                                         max(math.sqrt(radius), 1e-6))
-    moved = by_axis[config.smoothness.radius("translation", config.radius_frames)]
-    turned = by_axis[config.smoothness.radius("rotation", config.radius_frames)]
-    zoomed = by_axis[config.smoothness.radius("zoom", config.radius_frames)]
+    moved, turned, zoomed = (by_axis[radius_of[axis]] for axis in ("translation", "rotation", "zoom"))
     out = np.empty_like(moved)
     for i in range(len(moved)):
         _, _, angle, scale = geometry.decompose(moved[i], width, height)

@@ -98,7 +98,8 @@ def smooth(frame: np.ndarray, synthesized: np.ndarray, neighbours: Sequence[Comp
         difference = np.abs(sample - own).max(axis=1)
         rows = np.clip(np.rint(map_y), 0, height - 1).astype(np.intp)
         columns = np.clip(np.rint(map_x), 0, width - 1).astype(np.intp)
-        w = np.exp(-np.square(difference / config.sigma)).astype(np.float32) * (inside & neighbour.synthesized[rows, columns])
+        also_synthesized = inside & neighbour.synthesized[rows, columns]
+        w = np.exp(-np.square(difference / config.sigma)).astype(np.float32) * also_synthesized
         total += sample * w[:, None]
         weight += w
     out = frame.copy()
