@@ -91,7 +91,8 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
                  f"{size[0]}x{size[1]}", str(recording), str(rbl)],
                 env=env, stdout=subprocess.DEVNULL, stderr=log_file, start_new_session=True)
         try:
-            png = _drive(ViewerClient, port, viewer, frame, time.monotonic() + timeout_s)
+            png = _drive(ViewerClient, port, viewer, frame, time.monotonic() + timeout_s,
+                         tabs=str(layout.root_container.id), tab=str(layout.root_container.contents[index].id))
         except Exception as error:  # noqa: BLE001 - the viewer's own account first, where it stopped
             if _wait_stopped(viewer):
                 raise InputError(viewer_stopped(viewer.returncode, log.read_text(errors="replace"))) from None
@@ -130,7 +131,22 @@ def viewer_stopped(returncode: int | None, log: str) -> str:
     return f"the headless viewer stopped (exit {returncode}){reason}{hint}"
 
 
-def _drive(client_type, port: int, viewer: subprocess.Popen, frame: int, deadline: float) -> bytes:
+def shows_tab(blueprint: dict, tabs: str, tab: str) -> bool:
+    """Whether a blueprint, as the viewer reports it, is ours (its root tab container ``tabs`` is there) with
+    ``tab`` active."""
+    container = blueprint.get(f"/container/{tabs}", {}).get("ContainerBlueprint", {})
+    return container.get("active_tab") == f"container/{tab}"
+
+
+def _drive(client_type, port: int, viewer: subprocess.Popen, frame: int, deadline: float, *, tabs: str,
+           tab: str) -> bytes:
+    """Wait for the viewer to load the recording and the layout, move it to ``frame``, and screenshot it once
+    two screenshots a second apart agree.
+
+    The viewer opens the recording with its embedded blueprint and activates the layout file (ours, with the
+    asked tab ``tab`` of root container ``tabs`` active) only when that file has loaded too; on a loaded machine
+    that can come after the recording has drawn. So the screenshot waits until the active blueprint is ours.
+    """
     client = None
     while client is None:
         if viewer.poll() is not None:
@@ -152,6 +168,10 @@ def _drive(client_type, port: int, viewer: subprocess.Popen, frame: int, deadlin
     last = max((t.end for r in state.recordings for t in r.timelines if t.name == ent.FRAME_TIMELINE), default=0)
     if frame > last:
         raise ConfigError(f"--frame {frame}: the recording's frames are 0 to {last}")
+    while not shows_tab(client.get_blueprint().blueprint, tabs, tab):
+        if time.monotonic() > deadline:
+            raise InputError("the headless viewer did not take the snapshot's layout")
+        time.sleep(0.3)
     client.set_time(ent.FRAME_TIMELINE, sequence=frame, play_state="paused")
     previous, shot = None, None
     time.sleep(1.0)

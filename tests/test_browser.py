@@ -407,3 +407,44 @@ def test_a_viewer_that_cannot_render_is_told_in_one_line_with_its_remedy():
         assert "\n" not in line and "exit 102" in line and "Failed to get render context" in line
         assert "mesa-vulkan-drivers" in line
     assert viewer_stopped(1, "nothing useful") == "the headless viewer stopped (exit 1)"
+
+
+def test_the_snapshot_waits_for_its_own_layout_before_the_screenshot():
+    """The viewer shows the recording's embedded layout (overview tab) until the snapshot's layout file has
+    loaded; on a loaded CI machine that once came after two agreeing screenshots, and `--tab about` returned the
+    overview. The screenshot is taken only once the active blueprint is the snapshot's, with the asked tab."""
+    from types import SimpleNamespace
+
+    from ffviz import entities as ent
+    from ffviz.snapshot import _drive
+
+    ours = {"/container/ROOT": {"ContainerBlueprint": {"active_tab": "container/ABOUT"}}}
+    embedded = {"/container/OTHER": {"ContainerBlueprint": {"active_tab": "container/OVERVIEW"}}}
+
+    class Viewer:
+        def poll(self):
+            return None
+
+    class Client:
+        calls = 0
+
+        @classmethod
+        def connect(cls, url):
+            return cls()
+
+        def get_state(self):
+            timeline = SimpleNamespace(name=ent.FRAME_TIMELINE, end=11)
+            return SimpleNamespace(loading=[], recordings=[SimpleNamespace(timelines=[timeline])])
+
+        def get_blueprint(self):
+            Client.calls += 1
+            return SimpleNamespace(blueprint=ours if Client.calls > 3 else embedded)
+
+        def set_time(self, *args, **kwargs):
+            pass
+
+        def take_screenshot(self):
+            return b"about" if Client.calls > 3 else b"overview"
+
+    shot = _drive(Client, 0, Viewer(), 2, time.monotonic() + 30, tabs="ROOT", tab="ABOUT")
+    assert shot == b"about" and Client.calls == 4
