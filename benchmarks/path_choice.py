@@ -62,7 +62,7 @@ def l1(margin: float) -> smoothing.SmoothingConfig:
 VARIANTS = (("gaussian k=30", "none", smoothing.SmoothingConfig(), None),
             *((f"l1 margin {m:.0%}", "none", l1(m), None) for m in MARGINS),
             ("crop gaussian k=30", "crop", smoothing.SmoothingConfig(), None),
-            ("crop auto (default)", "crop", smoothing.SmoothingConfig(path="auto"), None),
+            ("crop auto (--crop-fill 0)", "crop", smoothing.SmoothingConfig(path="auto"), None),
             ("crop l1", "crop", l1(0.03), None),
             ("crop l1 --crop-scale 0.9", "crop", l1(0.03), 0.9),
             ("crop l1 --crop-scale 0.95", "crop", l1(0.03), 0.95))
@@ -121,7 +121,8 @@ def real_rows(clip: Path, frames: int | None, cache: dict, save, only: str = "")
         for label, mode, path, scale in VARIANTS:
             if label in rows or only not in label:
                 continue
-            config = StabilizeConfig(mode=mode, smoothing=path, crop=CropConfig(scale=scale))
+            # crop rows: windows inside every frame (--crop-fill 0), what the L1 program is compared in
+            config = StabilizeConfig(mode=mode, smoothing=path, crop=CropConfig(scale=scale, fill=0.0))
             plan, seconds = plan_seconds(motion_pass, config, width, height)
             out = work / f"{label.replace(' ', '_').replace('%', '')}.mp4"
             stabilize(source_path, out, dataclasses.replace(config, deblur=dataclasses.replace(

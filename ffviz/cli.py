@@ -194,12 +194,14 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     folder of recordings, one per video, and there is no --workers (batch: one thread per Ray task)."""
     p.add_argument("--mode", choices=stab.OUTPUT_MODES, default="full",
                    help="full: missing areas completed from neighbouring frames (full frame, no crop); "
-                        "crop: largest window valid in every frame, scaled back to full size; "
+                        "crop: a window scaled back to full size, valid in every frame but for a small share "
+                        "completed (--crop-fill); "
                         "none: missing areas left black (default: %(default)s)")
     p.add_argument("--smoothing-radius", "-k", type=int, default=None, metavar="K",
                    help="smoothing radius: frames on each side averaged into each frame's camera path (eq. 18); "
                         "larger is steadier but needs more completion or crop (default: "
-                        + ", ".join(f"{k} in {mode} mode" for mode, k in stab.DEFAULT_RADII.items()) + ")")
+                        + ", ".join(f"{k} in {mode} mode" for mode, k in stab.DEFAULT_RADII.items())
+                        + f"; {stab.HARD_CROP_RADIUS} in crop mode with a window inside every frame)")
     p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
                    help="width of that Gaussian, in frames (default: sqrt(K))")
     p.add_argument("--path", choices=smoothing.PATHS, default=None,
@@ -208,7 +210,8 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "longer side, 2 degrees and 4%% zoom of its input, or in crop mode inside the crop window); "
                         "tripod (see --tripod); auto (crop mode: l1 that also prices the path's shake over half a second, in "
                         "the widest window where it is as steady as gaussian, else gaussian; other modes: gaussian) "
-                        "(default: auto in crop mode, gaussian otherwise)")
+                        "(default: gaussian; auto in crop mode with a window inside every frame: --crop-fill 0, "
+                        "--crop-scale or --crop adaptive)")
     p.add_argument("--tripod", action="store_true",
                    help="hold the camera still (same as --path tripod): the output does not move while a still "
                         "view stays within 10%% of the frame, 4 degrees and 8%% zoom of every input frame; where the "
@@ -243,6 +246,11 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                    help="with --mode crop and --path l1 or tripod: the crop window's size as a share of the frame "
                         "each way (0.9 keeps 81%% of the area); the path is planned to keep this window inside "
                         "every input frame (default: the window the path keeps without that constraint)")
+    p.add_argument("--crop-fill", type=float, default=None, metavar="SHARE",
+                   help="with --mode crop on eq. 18's path: the window is the largest whose parts outside the input "
+                        "frames are at most SHARE of the output's pixels over the clip, completed from neighbouring "
+                        "frames as in full mode; 0: a window inside every frame, nothing synthesized, on the auto "
+                        "path at -k 30 (default: " + f"{stab.DEFAULT_CROP_FILL:g}" + ")")
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
                    help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "
                         "shear) or homography (also perspective) (default: %(default)s)")

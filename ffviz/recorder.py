@@ -1173,7 +1173,10 @@ def _settings_summary(config: Any) -> list[str]:
     rows = []
     mode = getattr(config, "mode", None)
     if mode is not None:
-        rows.append(f"mode: {_MODE_WORDS.get(mode, mode)}")
+        fill = getattr(config, "crop_fill", 0.0)
+        rows.append(f"mode: {_MODE_WORDS.get(mode, mode)}" if not fill else
+                    f"mode: crop: stabilize, then crop to the largest window whose parts outside the frames are at "
+                    f"most {fill:.2%} of the pixels over the clip, completed there (chapter 4)")
     smoothing = getattr(config, "smoothing", None)
     if smoothing is not None:
         words = {"gaussian": f"eq. 18, Gaussian over k = {smoothing.radius_frames} frames each side",

@@ -68,25 +68,26 @@ def parse_ignore(text: str) -> motion.IgnoreRegion:
 def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
     _check_options(args)
     try:
+        crop = adaptive_crop.CropConfig(kind=getattr(args, "crop", "fixed"),
+                                        zoom_speed=getattr(args, "zoom_speed", adaptive_crop.DEFAULT_ZOOM_SPEED),
+                                        scale=getattr(args, "crop_scale", None), fill=getattr(args, "crop_fill", None))
+        path = "tripod" if getattr(args, "tripod", False) else (getattr(args, "path", None)
+                                                                 or stab.default_path(args.mode, crop))
         return presets.with_quality(stab.StabilizeConfig(
             mode=args.mode,
             motion=motion.MotionConfig(model=args.motion_model, refine=args.refine,
                                        ignore=tuple(parse_ignore(text) for text in getattr(args, "ignore", [])),
                                        ignore_mask=getattr(args, "ignore_mask", None)),
             smoothing=smoothing.SmoothingConfig(
-                radius_frames=(stab.DEFAULT_RADII[args.mode] if args.smoothing_radius is None
-                               else args.smoothing_radius), sigma=args.smoothing_sigma,
-                path="tripod" if getattr(args, "tripod", False) else (getattr(args, "path", None)
-                                                                       or stab.DEFAULT_PATHS[args.mode]),
+                radius_frames=(stab.default_radius(args.mode, path, crop) if args.smoothing_radius is None
+                               else args.smoothing_radius), sigma=args.smoothing_sigma, path=path,
                 horizon_lock=getattr(args, "horizon_lock", False),
                 smoothness=(path_control.Smoothness.parse(args.smoothness)
                             if getattr(args, "smoothness", None) is not None else None),
                 max_shift=getattr(args, "max_shift", None), max_angle=getattr(args, "max_angle", None),
                 segments=tuple(path_control.PathSegment.parse(text) for text in getattr(args, "path_segment", []))),
             deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
-            crop=adaptive_crop.CropConfig(kind=getattr(args, "crop", "fixed"),
-                                          zoom_speed=getattr(args, "zoom_speed", adaptive_crop.DEFAULT_ZOOM_SPEED),
-                                          scale=getattr(args, "crop_scale", None)),
+            crop=crop,
             rolling_shutter=getattr(args, "rolling_shutter", None),
         ), getattr(args, "quality", "default"))
     except ValueError as error:  # the configs validate their own values

@@ -82,7 +82,8 @@ def _plan(motion_pass: MotionPass, config: StabilizeConfig, width: int, height: 
                                           height, config.motion.model)
     corrected = dataclasses.replace(motion_pass, curr_from_prev=correction.curr_from_prev)
     plan = _plan_views(corrected, config, width, height)
-    if plan.crop is not None:  # the window must also avoid what the rows' views leave uncovered
+    if plan.crop is not None and config.crop_fill == 0:  # the window must also avoid what the rows' views leave
+        # uncovered (a window that may leave the frames has what they leave uncovered completed)
         valid = np.stack([rows.valid_box(width) for rows in correction.rows])
         crop = warping.largest_crop(plan.smoothing.orig_from_stab, width, height, valid=valid)
         stab = plan.smoothing.orig_from_stab
@@ -118,7 +119,10 @@ def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, he
             return PathPlan(motion_pass, smoothed, orig_from_out, None, warnings)
         return PathPlan(motion_pass, smoothed, smoothed.orig_from_stab @ adaptive.stab_from_out, None, warnings,
                         adaptive_crop=adaptive)
-    if config.mode == "crop":
+    if config.crop_fill > 0:  # a window that may leave the frames by the fill, completed there
+        crop = warping.window_for_fill(smoothed.orig_from_stab, width, height, config.crop_fill)
+        orig_from_out = smoothed.orig_from_stab @ crop.stab_from_out
+    elif config.mode == "crop":
         crop = warping.largest_crop(smoothed.orig_from_stab, width, height)
         if crop is None:
             warnings.append(NO_CROP_WARNING)
@@ -201,7 +205,8 @@ class FrameChain:
         self.rows = plan.rolling_shutter.rows if plan.rolling_shutter is not None else None
         self.curr_from_prev = (plan.motion.curr_from_prev if plan.rolling_shutter is None
                                else plan.rolling_shutter.curr_from_prev)
-        self.orig_from_stab = plan.smoothing.orig_from_stab
+        # Crop mode with a fill completes in its window's coordinates: its output frames are the stabilized frames.
+        self.orig_from_stab = plan.orig_from_out if config.crop_fill > 0 else plan.smoothing.orig_from_stab
         self.orig_from_out = plan.orig_from_out
         self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
                                        side="right") - 1
@@ -242,10 +247,11 @@ class FrameChain:
             cpu[stage] = cpu.get(stage, 0.0) + now - clock
             clock = now
 
-        # Crop mode writes its own warp (by orig_from_out): the stabilized frame is made there only to be kept.
+        # Crop mode with its window inside every frame writes its own warp (by orig_from_out): the stabilized frame is
+        # made there only to be kept.
         stabilized = None
         rows = self.rows[t] if self.rows is not None else None
-        if config.mode != "crop" or self.keep:
+        if config.mode != "crop" or config.completing or self.keep:
             stabilized = rolling_shutter.warp_frame(frame.rgb, self.orig_from_stab[t], rows)
         same_shot = {n.index: n.rgb for n in window.neighbours.values()
                      if n.index < len(self.shot_of) and self.shot_of[n.index] == self.shot_of[t]}
@@ -256,7 +262,7 @@ class FrameChain:
             original = self.middle_row_views.get(t, (t, frame.rgb))
         warped: list[neighbours.WarpedNeighbour] = []
         completed = None
-        if config.completing:
+        if config.completing and (config.mode == "full" or stabilized.missing.any()):
             near = {i: rgb for i, rgb in same_shot.items() if abs(i - t) <= config.completion_frames}
             downscaled = self._downscaled(frame.rgb.shape[:2], t)
             warped = neighbours.warp_neighbours(near, t, self.curr_from_prev, self.orig_from_stab[t],
@@ -268,6 +274,9 @@ class FrameChain:
                                             target_original=itself)
             lap("completion")
             output, output_valid = completed.frame, None
+        elif config.completing:  # crop mode's window inside this frame: nothing to complete
+            output, output_valid = stabilized.frame, None
+            lap("warp")
         elif config.mode == "crop":
             output = (warping.warp(frame.rgb, self.orig_from_out[t]) if rows is None
                       else rolling_shutter.warp_frame(frame.rgb, self.orig_from_out[t], rows).frame)

@@ -12,15 +12,42 @@ from pipeline.stages import completion, deblur, motion, rolling_shutter, smoothi
 
 OutputMode = Literal["full", "none", "crop"]
 OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
-# Each mode's camera path when none is given. Crop: auto, the L1 program inside the widest crop window where it is
-# as steady as eq. 18's path, else eq. 18's (on every shared clip the L1 path, steadier and keeping more of the
-# frame); full and none: eq. 18, since the L1 path's wider departures leave completion more to fill
-# (docs/decisions.md, 2026-11-25).
-DEFAULT_PATHS = {"full": "gaussian", "none": "gaussian", "crop": "auto"}
-# Eq. 18's radius k by mode. Full mode (and none, its warp without completion) at 60: steadier than vid.stab's
-# cropped output on every shared clip, its wider missing area kept from flickering by completion's temporal
-# consistency; crop mode at 30, where a larger k only shrinks the window (docs/decisions.md 2026-11-27).
-DEFAULT_RADII = {"full": 60, "none": 60, "crop": smoothing.DEFAULT_RADIUS}
+# Each mode's camera path when none is given: eq. 18. Crop mode's window is then the largest centred one whose
+# parts outside the input frames are at most DEFAULT_CROP_FILL of the output's pixels over the clip, completed as
+# in full mode (vid.stab's default fills its window's corners from the previous frame likewise). With --crop-fill 0
+# (nothing synthesized), --crop-scale or --crop adaptive the window stays inside every frame, and crop mode's path
+# is auto: the L1 program inside the widest window where it is as steady as eq. 18's (docs/decisions.md,
+# 2026-11-25 and 2026-11-27).
+DEFAULT_PATHS = {"full": "gaussian", "none": "gaussian", "crop": "gaussian"}
+HARD_CROP_PATH = "auto"
+# Eq. 18's radius k by mode: 60, steadier than vid.stab's cropped output on every shared clip, full mode's wider
+# missing area kept from flickering by completion's temporal consistency; a crop window that stays inside every
+# frame at 30, where a larger k only shrinks the window (docs/decisions.md 2026-11-27).
+DEFAULT_RADII = {"full": 60, "none": 60, "crop": 60}
+HARD_CROP_RADIUS = smoothing.DEFAULT_RADIUS
+# The share of the output's pixels crop mode may synthesize by default: on the shared clips a window at least as
+# large as vid.stab's, completed on 10-38 % of the frames (docs/decisions.md 2026-11-27).
+DEFAULT_CROP_FILL = 0.003
+
+
+def fixed_crop_window(crop: CropConfig) -> bool:
+    """Whether crop mode's window is one of its own choosing for the whole clip (not --crop adaptive or
+    --crop-scale): the only window that may leave the frames to be completed."""
+    return crop.kind == "fixed" and crop.scale is None
+
+
+def default_path(mode: str, crop: CropConfig) -> str:
+    """The camera path of ``mode`` when none is given (crop mode: eq. 18 where its window may be completed)."""
+    if mode == "crop" and (crop.fill == 0 or not fixed_crop_window(crop)):
+        return HARD_CROP_PATH
+    return DEFAULT_PATHS[mode]
+
+
+def default_radius(mode: str, path: str, crop: CropConfig) -> int:
+    """Eq. 18's k when none is given, for ``mode`` on ``path``."""
+    if mode == "crop" and (path != "gaussian" or crop.fill == 0 or not fixed_crop_window(crop)):
+        return HARD_CROP_RADIUS
+    return DEFAULT_RADII[mode]
 
 
 @dataclass(frozen=True)
@@ -39,8 +66,13 @@ class StabilizeConfig:
         if self.mode not in OUTPUT_MODES:
             raise ConfigError(f"mode must be one of {', '.join(OUTPUT_MODES)}, not {self.mode!r}")
         if self.smoothing is None:
-            object.__setattr__(self, "smoothing", smoothing.SmoothingConfig(path=DEFAULT_PATHS[self.mode],
-                                                                           radius_frames=DEFAULT_RADII[self.mode]))
+            path = default_path(self.mode, self.crop)
+            object.__setattr__(self, "smoothing", smoothing.SmoothingConfig(
+                path=path, radius_frames=default_radius(self.mode, path, self.crop)))
+        if self.crop.fill and not self._crop_may_fill:
+            raise ConfigError("--crop-fill needs --mode crop with eq. 18's path (--path gaussian) and a fixed window "
+                              "of its own choosing: the l1, tripod and auto paths, --crop-scale and --crop adaptive "
+                              "keep the window inside every frame")
         if self.crop.scale is not None and not (self.mode == "crop" and self.smoothing.uses_l1):
             raise ConfigError("--crop-scale needs --mode crop and the l1 or tripod path (it is the L1 program's "
                               "crop-window constraint)")
@@ -53,9 +85,22 @@ class StabilizeConfig:
         return self.mode == "crop" or bool(paths & {"l1", "tripod"})
 
     @property
+    def _crop_may_fill(self) -> bool:
+        return self.mode == "crop" and fixed_crop_window(self.crop) and not self.smoothing.uses_l1
+
+    @property
+    def crop_fill(self) -> float:
+        """The share of the output's pixels (mean over the clip) crop mode's window may leave the frames by, to be
+        completed (0 in every other case)."""
+        if not self._crop_may_fill:
+            return 0.0
+        return DEFAULT_CROP_FILL if self.crop.fill is None else self.crop.fill
+
+    @property
     def completing(self) -> bool:
-        """Whether missing pixels are filled (chapter 4): full mode only."""
-        return self.mode == "full"
+        """Whether missing pixels are filled (chapter 4): full mode, and crop mode's window where it leaves the
+        frames."""
+        return self.mode == "full" or self.crop_fill > 0
 
     @property
     def deblurring(self) -> bool:

@@ -107,9 +107,9 @@ def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
     # the same stabilization (measured 3.2 px against none's 3.1; the input's 10.8): codec noise apart
     assert same_as_opencv["jitter_px"] < 0.4 * source["jitter_px"]
     assert rows["ffviz none"]["black"] > rows["ffviz crop"]["black"] + 0.005  # uncovered borders stay black
-    # the figure sees synthesized pixels where there are some (none's uncovered borders), and a crop has none,
-    # even where its window touches the warped input and the measured outline is a pixel or two off
-    assert rows["ffviz none"]["flicker"] is not None and rows["ffviz crop"]["flicker"] is None
+    # the figure sees synthesized pixels where there are some: none's uncovered borders (crop mode's window is
+    # completed where it leaves the frames, so it may have some too)
+    assert rows["ffviz none"]["flicker"] is not None
     assert "flicker" in (out / "bench.md").read_text().splitlines()[0]
 
 

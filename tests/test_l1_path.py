@@ -20,6 +20,8 @@ from pipeline.evaluation import metrics
 from pipeline.evaluation.synthetic import SyntheticConfig, generate
 
 W, H = 640, 360
+# Crop mode with a window inside every frame (nothing synthesized): its path is auto, the L1 program in its window
+HARD_CROP = adaptive_crop.CropConfig(fill=0.0)
 CENTRE = np.array([(W - 1) / 2.0, (H - 1) / 2.0, 1.0])
 
 
@@ -217,8 +219,9 @@ def test_crop_mode_default_path_is_never_shakier_than_eq18_and_keeps_as_much(see
                                      seed=seed))
     motion_pass = _motion_pass(video)
     times = motion_pass.times_s
-    auto = plan_path(motion_pass, StabilizeConfig(mode="crop"), W, H)
-    eq18 = plan_path(motion_pass, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig()), W, H)
+    auto = plan_path(motion_pass, StabilizeConfig(mode="crop", crop=HARD_CROP), W, H)
+    eq18 = plan_path(motion_pass, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig(), crop=HARD_CROP),
+                     W, H)
     assert chain._shake_px(auto.smoothing.smoothed_trajectory, times) <= chain._shake_px(
         eq18.smoothing.smoothed_trajectory, times) + 1e-9
 
@@ -288,7 +291,7 @@ def test_crop_mode_default_path_prices_the_shake_and_is_steadier_in_the_world(se
         px, deg = metrics.residual_jitter(np.array(view), 30.0)
         return px / kept, deg, kept
 
-    auto = plan_path(motion_pass, StabilizeConfig(mode="crop"), W, H)
+    auto = plan_path(motion_pass, StabilizeConfig(mode="crop", crop=HARD_CROP), W, H)
     grundmann = plan_path(motion_pass, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig(path="l1")),
                           W, H)
     assert auto.smoothing.settings[0] == "l1"
@@ -408,11 +411,18 @@ def test_the_recording_and_figure_show_both_paths_and_the_crop_constraint(tmp_pa
 
 
 def test_each_mode_plans_its_default_path_unless_given_one():
-    """Crop mode plans auto (the L1 path inside its window where steadier), full and none modes eq. 18's; a path
-    given is kept."""
-    from pipeline.config import DEFAULT_PATHS
+    """Every mode plans eq. 18's path at k = 60, crop mode's window then completed where it leaves the frames; a
+    crop window inside every frame (--crop-fill 0, --crop-scale, --crop adaptive) plans auto (the L1 path inside its
+    window where steadier) at k = 30; a path given is kept."""
+    from pipeline.config import DEFAULT_CROP_FILL, DEFAULT_PATHS
 
-    assert {mode: StabilizeConfig(mode=mode).smoothing.path for mode in ("full", "none", "crop")} == DEFAULT_PATHS
-    assert DEFAULT_PATHS == {"full": "gaussian", "none": "gaussian", "crop": "auto"}
+    for mode in ("full", "none", "crop"):
+        config = StabilizeConfig(mode=mode)
+        assert (config.smoothing.path, config.smoothing.radius_frames) == ("gaussian", 60) == (DEFAULT_PATHS[mode], 60)
+        assert config.crop_fill == (DEFAULT_CROP_FILL if mode == "crop" else 0.0)
+    for crop in (HARD_CROP, adaptive_crop.CropConfig(kind="adaptive"), adaptive_crop.CropConfig(scale=0.9)):
+        config = StabilizeConfig(mode="crop", crop=crop)
+        assert (config.smoothing.path, config.smoothing.radius_frames, config.crop_fill) == ("auto", 30, 0.0)
+        assert not config.completing
     given = smoothing.SmoothingConfig(path="gaussian", radius_frames=12)
     assert StabilizeConfig(mode="crop", smoothing=given).smoothing == given

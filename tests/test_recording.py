@@ -21,6 +21,7 @@ from ffviz.rrd import Recording
 from ffviz.viewer import rerun_executable
 from pipeline import geometry
 from pipeline.evaluation import synthetic
+from pipeline.stages.adaptive_crop import CropConfig
 from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_MOSAIC, SOURCE_NAMES, from_a_neighbour
 from pipeline.stages.neighbours import WarpedNeighbour
 from pipeline.results import FrameResult, Stamp
@@ -655,12 +656,17 @@ def test_about_tab_names_the_settings_that_differ_from_the_defaults():
     assert "`smoothing.radius_frames = 12`" in settings and "`deblur.enabled = False`" in settings
     assert "`mode = 'crop'`" in settings and "motion." not in settings
     # Crop mode's auto path: the tab says which path it planned (the recorder has it from the plan).
-    auto = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"), planned=("l1", "l1"))
+    hard = StabilizeConfig(mode="crop", crop=CropConfig(fill=0.0))  # a window inside every frame: the auto path
+    auto = RerunRecorder._meta_markdown(None, hard, planned=("l1", "l1"))
     assert "- auto chose: the L1 program in the crop window (`l1`)" in auto
+    assert "a window every frame covers" in auto and "`crop.fill = 0.0`" in auto
     eq18 = ("gaussian", "gaussian:k=30")
-    fallback = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"), planned=eq18)
+    fallback = RerunRecorder._meta_markdown(None, hard, planned=eq18)
     assert "- auto chose: eq. 18's path (`gaussian:k=30`)" in fallback
     assert "auto chose" not in RerunRecorder._meta_markdown(None, StabilizeConfig(), planned=eq18)
+    # Crop mode's default: eq. 18's path, its window completed where it leaves the frames
+    filled = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"))
+    assert "at most 0.30% of the pixels over the clip, completed there" in filled and "k = 60" in filled
 
 
 def test_live_view_and_file_at_once(clip, tmp_path):

@@ -21,6 +21,7 @@ from pipeline.runtime.observer import NullObserver
 from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
 from pipeline.stages import rolling_shutter
+from pipeline.stages.adaptive_crop import CropConfig
 
 W, H = 640, 360
 
@@ -165,8 +166,9 @@ def test_cli_refuses_a_bad_readout_in_one_line(tmp_path):
 def test_crop_window_avoids_what_the_row_views_leave_uncovered():
     video = clip(0.9, n_frames=30)
     keep = _Keep()
-    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="crop", rolling_shutter=0.9),
-                     observer=keep, workers=1)
+    stabilize_source(ArraySource(video.frames), None,
+                     StabilizeConfig(mode="crop", rolling_shutter=0.9, crop=CropConfig(fill=0.0)), observer=keep,
+                     workers=1)
     assert keep.plan.crop is not None
     # No output pixel samples outside its input frame (the border ring of black a plain crop would show).
     for t in range(video.n_frames):

@@ -135,6 +135,7 @@ def adaptive_crop(orig_from_stab: np.ndarray, width: int, height: int, *, zoom_s
 
 
 CROPS = ("fixed", "adaptive")
+MAX_FILL = 0.1  # more than a tenth of the output synthesized is full mode's job
 
 
 @dataclass(frozen=True)
@@ -145,6 +146,10 @@ class CropConfig:
     zoom_speed: float = DEFAULT_ZOOM_SPEED  # adaptive: % of the frame's size the zoom may change a frame
     # The L1 path's crop window (its scale of the frame, each way); None: the window the path without it keeps.
     scale: float | None = None
+    # Eq. 18's path with a fixed window: the share of the output's pixels (mean over the clip) completion may
+    # synthesize where the window leaves the frames (pipeline/config.py's crop_fill); 0: a window inside every
+    # frame, nothing synthesized; None: the default where it applies.
+    fill: float | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in CROPS:
@@ -152,5 +157,7 @@ class CropConfig:
         if self.scale is not None and not 0.3 <= self.scale < 1.0:  # False for nan
             raise ConfigError(f"crop scale must be in [0.3, 1) (the window's share of the frame each way), "
                               f"not {self.scale}")
+        if self.fill is not None and not 0.0 <= self.fill <= MAX_FILL:  # False for nan
+            raise ConfigError(f"crop fill must be in [0, {MAX_FILL}] (a share of the output's pixels), not {self.fill}")
         if not 0 < self.zoom_speed <= 10:
             raise ConfigError(f"zoom speed must be in (0, 10] % a frame, not {self.zoom_speed}")

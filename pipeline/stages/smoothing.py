@@ -23,8 +23,8 @@ from pipeline.geometry import neighbour_transforms
 from pipeline.stages import l1_path, path_control
 from pipeline.errors import ConfigError
 
-# k when none is given: crop mode's (full mode's is pipeline/config.DEFAULT_RADII's), chosen from measurements on the
-# real clips: docs/how-it-works.md, "Choosing k"
+# k of a SmoothingConfig made without one, and of crop mode with a window inside every frame (a run's default is
+# pipeline/config.default_radius's), chosen from measurements on the real clips: docs/how-it-works.md, "Choosing k"
 DEFAULT_RADIUS = 30
 
 

@@ -1,8 +1,8 @@
 """Warping by the smoothing transform (eq. 19), the mask of missing pixels, and the crop window.
 
 A stabilized pixel p' takes the original's value at S_t p' (``orig_from_stab``); where S_t p' falls outside
-the original frame the pixel is missing: black in ``--mode none``, cropped away in ``--mode crop``,
-completed from neighbours in full-frame mode.
+the original frame the pixel is missing: black in ``--mode none``, cropped away in ``--mode crop`` (or, by
+its fill, completed where the window leaves a frame), completed from neighbours in full-frame mode.
 """
 
 from __future__ import annotations
@@ -144,3 +144,63 @@ def largest_crop(orig_from_stab: np.ndarray, width: int, height: int,
 
     x0, y0, scale = result.x
     return CropWindow(float(x0), float(y0), float(scale))
+
+
+FILL_GRID = (96, 54)  # output points a frame at which window_for_fill measures what leaves the frame
+FILL_MIN_SCALE = 0.3  # the smallest window window_for_fill considers (--crop-scale's least)
+FILL_STEP = 1e-4  # window_for_fill's scales are multiples of this
+FILL_CHUNK_FRAMES = 256  # frames measured at once (memory: a chunk's frames times FILL_GRID's points)
+
+
+def _leaving_scales(orig_from_stab: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(N, P): for each frame and each of the FILL_GRID's output points p (the centres of equal cells), the scale s
+    from which the centred window's point c + s (p - c) maps outside the input frame. Along s the mapped point
+    moves on a line (x and y are ratios of functions linear in s, the denominator positive), so it leaves the
+    frame once, where the first of its four edges is crossed, and never comes back: a point outside at s is outside
+    at every larger s. 0 where the window's centre itself is outside."""
+    xs = (np.arange(FILL_GRID[0]) + 0.5) * width / FILL_GRID[0] - 0.5
+    ys = (np.arange(FILL_GRID[1]) + 0.5) * height / FILL_GRID[1] - 0.5
+    gx, gy = np.meshgrid(xs, ys)
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0, 1.0])
+    m = np.asarray(orig_from_stab, np.float64)
+    at_centre = (m @ centre)[:, :, None]  # (N, 3, 1): the mapped point at s = 0
+    per_scale = m[:, :, :2] @ np.stack([gx.ravel() - centre[0], gy.ravel() - centre[1]])  # (N, 3, P): its change
+    x0, y0, w0 = at_centre[:, 0], at_centre[:, 1], at_centre[:, 2]
+    x1, y1, w1 = per_scale[:, 0], per_scale[:, 1], per_scale[:, 2]
+    leaving = np.full(x1.shape, np.inf)
+    # each edge as g0 + s g1 >= 0: x >= 0, x <= W - 1, y >= 0, y <= H - 1 (times the positive denominator), w > 0
+    for g0, g1 in ((x0, x1), ((width - 1) * w0 - x0, (width - 1) * w1 - x1), (y0, y1),
+                   ((height - 1) * w0 - y0, (height - 1) * w1 - y1), (w0, w1)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            crossing = np.where(g1 < 0, g0 / -np.minimum(g1, -1e-300), np.inf)
+        leaving = np.minimum(leaving, np.where(g0 < 0, 0.0, crossing))
+    return leaving
+
+
+def window_share_outside(orig_from_stab: np.ndarray, width: int, height: int, scale: float) -> np.ndarray:
+    """(N,) for each frame, the share of the centred window of ``scale`` (stab = c + scale (out - c), c the frame's
+    centre) whose input pixel lies outside the input frame: what completion must synthesize there (FILL_GRID's
+    points)."""
+    return np.concatenate([(_leaving_scales(orig_from_stab[i:i + FILL_CHUNK_FRAMES], width, height) < scale)
+                           .mean(axis=1) for i in range(0, len(orig_from_stab), FILL_CHUNK_FRAMES)])
+
+
+def window_for_fill(orig_from_stab: np.ndarray, width: int, height: int, fill: float) -> CropWindow:
+    """The largest centred window of the input's aspect ratio (a multiple of FILL_STEP, FILL_MIN_SCALE to 1) whose
+    parts outside the input frames are at most ``fill`` of the output's pixels, averaged over the frames
+    (``window_share_outside``); completion fills them. Each point leaves at one scale (``_leaving_scales``), so the
+    share is a count of leaving scales below the window's: one histogram of them over the clip gives every window's
+    share, in memory bounded by FILL_CHUNK_FRAMES."""
+    steps = int(round(1.0 / FILL_STEP))
+    below = np.zeros(steps + 2, np.int64)  # below[i]: points leaving at scales in [(i - 1) step, i step)
+    total = 0
+    for i in range(0, len(orig_from_stab), FILL_CHUNK_FRAMES):
+        leaving = _leaving_scales(orig_from_stab[i:i + FILL_CHUNK_FRAMES], width, height)
+        index = np.floor(np.minimum(leaving.ravel(), 2.0) / FILL_STEP).astype(np.int64) + 1
+        below += np.bincount(np.minimum(index, steps + 1), minlength=steps + 2)
+        total += leaving.size
+    outside = np.cumsum(below)[:steps + 1] / max(total, 1)  # outside[i]: share leaving at scales below i step
+    fitting = np.nonzero(outside <= fill + 1e-12)[0]
+    scale = max(float(fitting[-1]) * FILL_STEP if len(fitting) else 0.0, FILL_MIN_SCALE)
+    centre = ((width - 1) / 2.0, (height - 1) / 2.0)
+    return CropWindow(centre[0] * (1.0 - scale), centre[1] * (1.0 - scale), scale)

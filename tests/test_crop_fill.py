@@ -1,0 +1,161 @@
+"""Crop mode's default window: the largest whose parts outside the input frames are at most --crop-fill of the
+output's pixels over the clip, completed there as in full mode (pipeline/stages/warping.py's window_for_fill,
+pipeline/config.py's crop_fill), against ground truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ffviz import cli
+from pipeline import geometry
+from pipeline.config import DEFAULT_CROP_FILL, StabilizeConfig
+from pipeline.errors import ConfigError
+from pipeline.evaluation import metrics
+from pipeline.evaluation.synthetic import SyntheticConfig, generate
+from pipeline.runtime.observer import NullObserver
+from pipeline.runtime.source import ArraySource
+from pipeline.stabilize import stabilize_source
+from pipeline.stages import smoothing, warping
+from pipeline.stages.adaptive_crop import CropConfig
+
+W, H = 320, 180
+
+
+def dense_share_outside(orig_from_stab: np.ndarray, scale: float) -> np.ndarray:
+    """Ground truth for window_share_outside: every output pixel of the centred window of ``scale`` mapped to its
+    input frame, counted outside it."""
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
+    centre = np.array([(W - 1) / 2.0, (H - 1) / 2.0])
+    window = np.stack([centre[0] + scale * (xs.ravel() - centre[0]), centre[1] + scale * (ys.ravel() - centre[1])], 1)
+    shares = []
+    for m in orig_from_stab:
+        x, y = geometry.apply(m, window).T
+        shares.append(np.mean((x < 0) | (x > W - 1) | (y < 0) | (y > H - 1)))
+    return np.array(shares)
+
+
+def wandering_path(n: int = 120, seed: int = 0) -> np.ndarray:
+    """orig_from_stab of a path that departs from its frames by up to ~6 % of the width, turns up to 2 degrees and
+    zooms 2 %, one frame in eight in perspective: the window leaves some frames at every scale above ~0.85."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for t in range(n):
+        dx, dy = 20 * math.sin(t / 9.0) + rng.normal(0, 3), 8 * math.cos(t / 13.0) + rng.normal(0, 2)
+        angle, zoom = math.radians(2 * math.sin(t / 17.0)), 1.0 + 0.02 * math.sin(t / 11.0)
+        c, s = zoom * math.cos(angle), zoom * math.sin(angle)
+        centre = np.array([(W - 1) / 2.0, (H - 1) / 2.0])
+        m = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        m[:2, 2] = centre + (dx, dy) - m[:2, :2] @ centre
+        if t % 8 == 0:
+            m = m @ np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [2e-5, -1e-5, 1.0]])
+        out.append(m)
+    return np.array(out)
+
+
+def test_the_share_outside_matches_a_count_of_every_pixel():
+    path = wandering_path()
+    for scale in (0.8, 0.9, 0.95, 1.0):
+        measured = warping.window_share_outside(path, W, H, scale)
+        truth = dense_share_outside(path, scale)
+        assert np.abs(measured - truth).max() < 0.01 and abs(measured.mean() - truth.mean()) < 1e-3, scale
+
+
+@pytest.mark.parametrize("fill", [0.0, 0.001, 0.003, 0.02])
+def test_the_window_is_the_largest_within_the_fill(fill):
+    path = wandering_path(seed=1)
+    window = warping.window_for_fill(path, W, H, fill)
+    centre = np.array([(W - 1) / 2.0, (H - 1) / 2.0])
+    np.testing.assert_allclose(window.stab_from_out[:2, 2] + window.scale * centre, centre)  # centred
+    assert 0.5 < window.scale < 1.0
+    assert dense_share_outside(path, window.scale).mean() <= fill + 3e-4
+    assert dense_share_outside(path, window.scale + 0.003).mean() > fill  # a larger window leaves by more
+    if fill == 0.0:  # inside every frame; the free window of largest_crop may sit off centre and be larger
+        assert window.scale <= warping.largest_crop(path, W, H).scale + 1e-3
+
+
+def test_a_still_camera_keeps_the_whole_frame():
+    assert warping.window_for_fill(np.repeat(np.eye(3)[None], 10, 0), W, H, DEFAULT_CROP_FILL).scale == 1.0
+
+
+class _Keep(NullObserver):
+    def __init__(self) -> None:
+        self.plan, self.outputs, self.missing = None, {}, {}
+
+    def on_path(self, plan) -> None:
+        self.plan = plan
+
+    def on_frame(self, result) -> None:
+        self.outputs[result.stamp.index] = result.output
+        self.missing[result.stamp.index] = result.warp.missing
+
+
+def _view_jitter(video, orig_from_out: np.ndarray) -> float:
+    """Residual jitter (px) of the output's view centre in the world, per unit of the window (as the output shows
+    it)."""
+    view = []
+    for t, m in enumerate(orig_from_out):
+        world_from_out = np.linalg.inv(video.frame_from_world[t]) @ m
+        x, y = (world_from_out @ np.array([(W - 1) / 2.0, (H - 1) / 2.0, 1.0]))[:2]
+        view.append((x, y, math.atan2(world_from_out[1, 0], world_from_out[0, 0])))
+    return metrics.residual_jitter(np.array(view), 30.0)[0]
+
+
+@pytest.mark.parametrize("kind, seed", [("person", 0), ("disc", 1)])
+def test_crop_mode_completes_its_window_where_it_leaves_the_frames(kind, seed):
+    """A shaken synthetic camera with a large moving object (a person in the photograph's own colours, or a disc):
+    crop mode's default keeps a larger window than one inside every frame, leaves the frames by the fill on average,
+    completes what it leaves with pixels close to the truth (the world seen through the output's view), and shows
+    no black pixel; its view of the world is steady."""
+    video = generate(SyntheticConfig(width=W, height=H, n_frames=60, seed=seed, jitter_px=6.0, object_kind=kind))
+    filled, hard = _Keep(), _Keep()
+    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="crop"), observer=filled, workers=1)
+    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="crop", crop=CropConfig(fill=0.0)),
+                     observer=hard, workers=1)
+    assert filled.plan.crop.scale > hard.plan.crop.scale + 0.03  # measured 0.90 against 0.83-0.86
+    np.testing.assert_allclose(filled.plan.orig_from_out,
+                               filled.plan.smoothing.orig_from_stab @ filled.plan.crop.stab_from_out)
+    shares = np.array([filled.missing[t].mean() for t in range(video.n_frames)])
+    assert 0.5 * DEFAULT_CROP_FILL < shares.mean() < 1.5 * DEFAULT_CROP_FILL and (shares > 0).sum() >= 5
+    synthesized, truth = [], []
+    for t in range(video.n_frames):
+        out_from_orig = np.linalg.inv(filled.plan.orig_from_out[t])
+        known = filled.missing[t] & video.view_coverage(t, out_from_orig)
+        synthesized.append(filled.outputs[t][known])
+        truth.append(video.render_view(t, out_from_orig)[known])
+        assert metrics.black_fraction(filled.outputs[t]) < 1e-3  # dark picture content at most, no border
+    error = np.concatenate(synthesized).astype(np.float64) - np.concatenate(truth)
+    psnr = 10 * math.log10(255.0**2 / np.mean(error**2))
+    assert psnr > 24.0  # measured 28.0-31.7 dB
+    shaken = _view_jitter(video, np.repeat(np.eye(3)[None], video.n_frames, 0))
+    assert _view_jitter(video, filled.plan.orig_from_out) < 0.5 * shaken
+
+
+def test_crop_fill_settings():
+    assert StabilizeConfig(mode="crop").crop_fill == DEFAULT_CROP_FILL
+    assert StabilizeConfig(mode="crop", crop=CropConfig(fill=0.01)).crop_fill == 0.01
+    assert StabilizeConfig(mode="crop", crop=CropConfig(fill=0.01)).completing
+    for config in (dict(mode="full"), dict(mode="crop", smoothing=smoothing.SmoothingConfig(path="l1")),
+                   dict(mode="crop", crop=CropConfig(kind="adaptive", fill=0.01)),
+                   dict(mode="crop", crop=CropConfig(scale=0.9, fill=0.01))):
+        with pytest.raises(ConfigError, match="--crop-fill"):
+            StabilizeConfig(**{**config, "crop": config.get("crop", CropConfig(fill=0.01))})
+    for bad in (-0.1, 0.5, float("nan")):
+        with pytest.raises(ConfigError, match="crop fill"):
+            CropConfig(fill=bad)
+
+
+def test_crop_fill_on_the_command_line(tmp_path, capsys):
+    video = generate(SyntheticConfig(width=W, height=H, n_frames=12, seed=3, moving_object=False))
+    from pipeline.evaluation.synthetic import write_video
+
+    clip = tmp_path / "clip.mp4"
+    write_video(video, clip)
+    assert cli.main(["stabilize", str(clip), "-o", str(tmp_path / "out.mp4"), "--mode", "crop", "--crop-fill",
+                     "0", "--path", "l1"]) == 0
+    assert cli.main(["stabilize", str(clip), "-o", str(tmp_path / "bad.mp4"), "--mode", "crop", "--crop-fill",
+                     "0.01", "--path", "l1"]) == 2
+    error = capsys.readouterr().err
+    assert "--crop-fill" in error and "Traceback" not in error and not (tmp_path / "bad.mp4").exists()
