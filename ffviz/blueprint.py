@@ -31,8 +31,9 @@ TAB_NOTES = {
                   "`I'_t(p) = I_t(S_t p)`): the camera path original against smoothed; the stabilized frame and, "
                   "in red, the area no input pixel covers (the crop window in yellow with `--mode crop`). Each "
                   "path view also draws eq. 18's and the L1 path on the same motion, whichever the run follows; "
-                  "with `--mode crop` the input shows the output's corners, which must stay inside it (their "
-                  "room in px is charted under the paths)."),
+                  "with `--mode crop` the input shows the output's corners and their room inside it in px, charted "
+                  "under the paths (below 0 the window leaves the frame there, and that part is completed as in "
+                  "the mosaic and local flow tabs; with `--crop-fill 0` it never does)."),
     "mosaic": ("**Consistent mosaic** (eqs. 20-22): where the aligned neighbours agree (variance of eq. 20 "
                "below the threshold) the missing pixel takes their mean (eq. 21-22, green); where they disagree "
                "(red) it is left to motion inpainting."),
@@ -138,7 +139,7 @@ def motion_tab(rolling_shutter: bool = False) -> rrb.Container:
 def smoothing_tab(crop: bool = False) -> rrb.Container:
     """``crop``: a --mode crop run, whose crop scale and crop-window room get charts (empty in the other modes)."""
     crop_charts = [rrb.TimeSeriesView(name="crop scale", origin=f"/{ent.CROP_SCALE}"),
-                   rrb.TimeSeriesView(name="crop window's room in the input, px (>= 0: no black pixel)",
+                   rrb.TimeSeriesView(name="crop window's room in the input, px (< 0: completed there)",
                                       origin=f"/{ent.CROP_ROOM}")] if crop else []
     return rrb.Vertical(
         rrb.Horizontal(

@@ -208,6 +208,8 @@ class FrameChain:
         # Crop mode with a fill completes in its window's coordinates: its output frames are the stabilized frames.
         self.orig_from_stab = plan.orig_from_out if config.crop_fill > 0 else plan.smoothing.orig_from_stab
         self.orig_from_out = plan.orig_from_out
+        # Crop mode with a fill keeps (for recordings) the stabilized frame its window is cut from, not the window.
+        self.orig_from_uncropped = plan.smoothing.orig_from_stab if config.crop_fill > 0 else None
         self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
                                        side="right") - 1
         self.keep = keep_intermediates
@@ -299,6 +301,8 @@ class FrameChain:
                 if self.temporal_radius and completed is not None else None)
         if not self.keep:
             return FrameResult(stamp, frame.pts, output, cpu_seconds=cpu, completed=held)
+        if self.orig_from_uncropped is not None:
+            stabilized = rolling_shutter.warp_frame(frame.rgb, self.orig_from_uncropped[t], rows)
         return FrameResult(stamp, frame.pts, output, input=frame, warp=stabilized, completion=completed,
                            deblur=deblurred, cpu_seconds=cpu, completed=held)
 

@@ -26,7 +26,7 @@ HARD_CROP_PATH = "auto"
 DEFAULT_RADII = {"full": 60, "none": 60, "crop": 60}
 HARD_CROP_RADIUS = smoothing.DEFAULT_RADIUS
 # The share of the output's pixels crop mode may synthesize by default: on the shared clips a window at least as
-# large as vid.stab's, completed on 10-38 % of the frames (docs/decisions.md 2026-11-27).
+# large as vid.stab's, completed on 18-38 % of the frames of issue 28's seven (docs/decisions.md 2026-11-27).
 DEFAULT_CROP_FILL = 0.003
 
 

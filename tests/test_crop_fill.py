@@ -88,8 +88,15 @@ class _Keep(NullObserver):
         self.plan = plan
 
     def on_frame(self, result) -> None:
+        """The output and what completion synthesized in it (nothing where the window stays inside the frame); the
+        recorded stabilized frame is the one the window is cut from."""
         self.outputs[result.stamp.index] = result.output
-        self.missing[result.stamp.index] = result.warp.missing
+        completed = result.completion
+        self.missing[result.stamp.index] = (completed.missing if completed is not None
+                                            else np.zeros(result.output.shape[:2], bool))
+        assert result.warp.frame.shape == result.output.shape
+        if self.plan.crop.scale < 1.0:
+            np.testing.assert_allclose(result.warp.orig_from_out, self.plan.smoothing.orig_from_stab[result.stamp.index])
 
 
 def _view_jitter(video, orig_from_out: np.ndarray) -> float:
@@ -128,7 +135,7 @@ def test_crop_mode_completes_its_window_where_it_leaves_the_frames(kind, seed):
         assert metrics.black_fraction(filled.outputs[t]) < 1e-3  # dark picture content at most, no border
     error = np.concatenate(synthesized).astype(np.float64) - np.concatenate(truth)
     psnr = 10 * math.log10(255.0**2 / np.mean(error**2))
-    assert psnr > 24.0  # measured 28.0-31.7 dB
+    assert psnr > 24.0  # measured 31.7 (person) and 26.4 dB (disc)
     shaken = _view_jitter(video, np.repeat(np.eye(3)[None], video.n_frames, 0))
     assert _view_jitter(video, filled.plan.orig_from_out) < 0.5 * shaken
 
