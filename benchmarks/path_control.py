@@ -25,18 +25,22 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "videos"
 DEFAULT_CLIPS = ("sudheerachary_small-shaky-5.avi", "vplab_C.avi", "zhangyilang_03_input.avi")
 
 # (label, ffviz options, the vid.stab options that match it or None)
+# Windows inside every frame (--crop-fill 0, as --crop adaptive's always is), eq. 18's path at k = 30 unless named:
+# the path controls compared with vid.stab's matching options on the same footing.
+HARD = ["--path", "gaussian", "--crop-fill", "0"]
 FFVIZ = (
-    ("gaussian, fixed crop (default)", [], None),
-    ("gaussian, --crop adaptive", ["--crop", "adaptive"], None),
-    ("gaussian, --crop adaptive --zoom-speed 0.25", ["--crop", "adaptive", "--zoom-speed", "0.25"], None),
-    ("gaussian, --smoothness 25", ["--smoothness", "25"], None),
-    ("gaussian, --smoothness 75", ["--smoothness", "75"], None),
-    ("gaussian, --smoothness t=75,r=100,z=100", ["--smoothness", "t=75,r=100,z=100"], None),
-    ("gaussian, --max-shift 8 --max-angle 1", ["--max-shift", "8", "--max-angle", "1"], None),
+    ("gaussian, fixed crop", HARD, None),
+    ("gaussian, --crop adaptive", ["--path", "gaussian", "-k", "30", "--crop", "adaptive"], None),
+    ("gaussian, --crop adaptive --zoom-speed 0.25", ["--path", "gaussian", "-k", "30", "--crop", "adaptive",
+                                                     "--zoom-speed", "0.25"], None),
+    ("gaussian, --smoothness 25", [*HARD, "--smoothness", "25"], None),
+    ("gaussian, --smoothness 75", [*HARD, "--smoothness", "75"], None),
+    ("gaussian, --smoothness t=75,r=100,z=100", [*HARD, "--smoothness", "t=75,r=100,z=100"], None),
+    ("gaussian, --max-shift 8 --max-angle 1", [*HARD, "--max-shift", "8", "--max-angle", "1"], None),
     ("l1, fixed crop", ["--path", "l1"], None),
     ("l1, --crop adaptive", ["--path", "l1", "--crop", "adaptive"], None),
     ("tripod", ["--tripod"], None),
-    ("tripod 0-3 s, then gaussian", ["--path-segment", "0-3:tripod"], None),
+    ("tripod 0-3 s, then gaussian", [*HARD, "--path-segment", "0-3:tripod"], None),
 )
 VIDSTAB = (
     ("vid.stab optzoom=1 (default)", "", ""),
