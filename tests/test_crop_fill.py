@@ -96,7 +96,8 @@ class _Keep(NullObserver):
                                             else np.zeros(result.output.shape[:2], bool))
         assert result.warp.frame.shape == result.output.shape
         if self.plan.crop.scale < 1.0:
-            np.testing.assert_allclose(result.warp.orig_from_out, self.plan.smoothing.orig_from_stab[result.stamp.index])
+            uncropped = self.plan.smoothing.orig_from_stab[result.stamp.index]
+            np.testing.assert_allclose(result.warp.orig_from_out, uncropped)
 
 
 def _view_jitter(video, orig_from_out: np.ndarray) -> float:
