@@ -51,8 +51,8 @@ examples:
       full-frame output (the default --mode full), H.264, audio copied
   ffviz stabilize shaky.mp4 -o steady.mp4 --rrd
       also record every step to recordings/shaky.rrd; then: ffviz view recordings/shaky.rrd
-  ffviz stabilize shaky.mp4 -o steady.mp4 --mode crop -k 15
-      faster: crop to the area valid in every frame, with lighter smoothing
+  ffviz stabilize shaky.mp4 -o steady.mp4 --mode crop --crop-fill 0
+      faster: crop to a window inside every frame, nothing synthesized
   ffviz stabilize shaky.mp4 -o steady.mp4 --rrd runs/a.rrd --frames 10,40
       record to runs/a.rrd and follow frames 10 and 40 through every stage
   ffviz stabilize big.mov -o steady.mp4 --codec mpeg4 --workers 1
