@@ -93,15 +93,17 @@ def test_segment_plan_covers_every_frame_once():
         segments.plan(20, 0)
 
 
-def test_segment_parallel_run_gives_the_single_runs_frames(local_ray, tmp_path):
+@pytest.mark.parametrize("mode", ["full", "crop"])
+def test_segment_parallel_run_gives_the_single_runs_frames(local_ray, tmp_path, mode):
     # Two shots with a cut at frame 12, which is also a segment boundary; full mode with deblurring reads
-    # 6 frames either side, so every segment's window crosses into its neighbours.
+    # 6 frames either side, so every segment's window crosses into its neighbours (crop mode's window is completed
+    # where it leaves a frame, alike).
     a = synthetic.generate(synthetic.SyntheticConfig(n_frames=12, seed=1, image="coffee", **SMALL))
     b = synthetic.generate(synthetic.SyntheticConfig(n_frames=12, seed=2, image="astronaut", **SMALL))
     clip = tmp_path / "two_shots.mp4"
     synthetic.write_video(list(a.frames) + list(b.frames), clip, fps=30.0)
-    config = stab.StabilizeConfig(mode="full")
-    assert config.window_frames > 0
+    config = stab.StabilizeConfig(mode=mode)
+    assert config.window_frames > 0 and config.completing
 
     single = StageCollector("output")
     single_report = stab.stabilize(clip, None, config, observer=single)
