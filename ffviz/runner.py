@@ -71,21 +71,25 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
         crop = adaptive_crop.CropConfig(kind=getattr(args, "crop", "fixed"),
                                         zoom_speed=getattr(args, "zoom_speed", adaptive_crop.DEFAULT_ZOOM_SPEED),
                                         scale=getattr(args, "crop_scale", None), fill=getattr(args, "crop_fill", None))
+        segments = tuple(path_control.PathSegment.parse(text) for text in getattr(args, "path_segment", []))
+        l1_segments = any(segment.path != "gaussian" for segment in segments)
         path = "tripod" if getattr(args, "tripod", False) else (getattr(args, "path", None)
-                                                                 or stab.default_path(args.mode, crop))
+                                                                 or stab.default_path(args.mode, crop,
+                                                                                      l1_segments=l1_segments))
         return presets.with_quality(stab.StabilizeConfig(
             mode=args.mode,
             motion=motion.MotionConfig(model=args.motion_model, refine=args.refine,
                                        ignore=tuple(parse_ignore(text) for text in getattr(args, "ignore", [])),
                                        ignore_mask=getattr(args, "ignore_mask", None)),
             smoothing=smoothing.SmoothingConfig(
-                radius_frames=(stab.default_radius(args.mode, path, crop) if args.smoothing_radius is None
+                radius_frames=(stab.default_radius(args.mode, path, crop, l1_segments=l1_segments)
+                               if args.smoothing_radius is None
                                else args.smoothing_radius), sigma=args.smoothing_sigma, path=path,
                 horizon_lock=getattr(args, "horizon_lock", False),
                 smoothness=(path_control.Smoothness.parse(args.smoothness)
                             if getattr(args, "smoothness", None) is not None else None),
                 max_shift=getattr(args, "max_shift", None), max_angle=getattr(args, "max_angle", None),
-                segments=tuple(path_control.PathSegment.parse(text) for text in getattr(args, "path_segment", []))),
+                segments=segments),
             deblur=deblur.DeblurConfig(enabled=args.deblur, alpha=args.deblur_alpha),
             crop=crop,
             rolling_shutter=getattr(args, "rolling_shutter", None),

@@ -36,16 +36,17 @@ def fixed_crop_window(crop: CropConfig) -> bool:
     return crop.kind == "fixed" and crop.scale is None
 
 
-def default_path(mode: str, crop: CropConfig) -> str:
-    """The camera path of ``mode`` when none is given (crop mode: eq. 18 where its window may be completed)."""
-    if mode == "crop" and (crop.fill == 0 or not fixed_crop_window(crop)):
+def default_path(mode: str, crop: CropConfig, *, l1_segments: bool = False) -> str:
+    """The camera path of ``mode`` when none is given (crop mode: eq. 18 where its window may be completed, so not
+    with ``l1_segments``, path segments planned by the L1 program in the window)."""
+    if mode == "crop" and (crop.fill == 0 or not fixed_crop_window(crop) or l1_segments):
         return HARD_CROP_PATH
     return DEFAULT_PATHS[mode]
 
 
-def default_radius(mode: str, path: str, crop: CropConfig) -> int:
+def default_radius(mode: str, path: str, crop: CropConfig, *, l1_segments: bool = False) -> int:
     """Eq. 18's k when none is given, for ``mode`` on ``path``."""
-    if mode == "crop" and (path != "gaussian" or crop.fill == 0 or not fixed_crop_window(crop)):
+    if mode == "crop" and (path != "gaussian" or crop.fill == 0 or not fixed_crop_window(crop) or l1_segments):
         return HARD_CROP_RADIUS
     return DEFAULT_RADII[mode]
 

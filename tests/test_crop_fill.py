@@ -167,3 +167,26 @@ def test_crop_fill_on_the_command_line(tmp_path, capsys):
                      "0.01", "--path", "l1"]) == 2
     error = capsys.readouterr().err
     assert "--crop-fill" in error and "Traceback" not in error and not (tmp_path / "bad.mp4").exists()
+
+
+def test_the_command_lines_crop_mode_paths():
+    """What `--mode crop` plans from the command line: eq. 18 at k = 60 with the fill by default; a window inside
+    every frame (auto at k = 30) with --crop-fill 0, --crop-scale, --crop adaptive or a path segment the L1 program
+    plans in the window; -k and --path as given."""
+    from ffviz.runner import stabilize_config
+
+    parser = cli.build_parser()
+
+    def config(*options: str) -> StabilizeConfig:
+        return stabilize_config(parser.parse_args(["stabilize", "in.mp4", "-o", "out.mp4", "--mode", "crop", *options]))
+
+    def planned(c: StabilizeConfig) -> tuple:
+        return c.smoothing.path, c.smoothing.radius_frames, c.crop_fill
+
+    assert planned(config()) == ("gaussian", 60, DEFAULT_CROP_FILL) and config() == StabilizeConfig(mode="crop")
+    assert planned(config("--crop-fill", "0.01", "-k", "40")) == ("gaussian", 40, 0.01)
+    for options in (["--crop-fill", "0"], ["--crop-scale", "0.9"], ["--crop", "adaptive"],
+                    ["--path-segment", "0-3:tripod"]):
+        assert planned(config(*options)) == ("auto", 30, 0.0), options
+    assert planned(config("--path", "gaussian", "--crop-fill", "0")) == ("gaussian", 30, 0.0)
+    assert planned(config("--path", "l1")) == ("l1", 30, 0.0)
