@@ -29,6 +29,9 @@ import numpy as np
 
 SINGLE_FRAME_WARNING = "only one frame: there is no motion to smooth, written as it is"
 NO_CROP_WARNING = "no area is common to all stabilized frames: crop disabled, borders left black"
+CROP_FILL_WARNING = ("the crop window leaves the frames by more than --crop-fill even at {scale:.2f} of the frame: "
+                     "{share:.1%} of the output is completed, not {fill:.1%} (a smaller -k keeps the path nearer its "
+                     "frames)")
 # Crop mode's L1 window without --crop-scale is first tried at the one eq. 18's path at this radius keeps. --path l1:
 # the room the shake within about half a second needs (about what vid.stab's defaults keep:
 # docs/benchmarks-l1-vs-vidstab.md). --path auto (crop mode's default) also prices the path's shake
@@ -122,6 +125,9 @@ def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, he
     if config.crop_fill > 0:  # a window that may leave the frames by the fill, completed there
         crop = warping.window_for_fill(smoothed.orig_from_stab, width, height, config.crop_fill)
         orig_from_out = smoothed.orig_from_stab @ crop.stab_from_out
+        share = float(warping.window_share_outside(smoothed.orig_from_stab, width, height, crop.scale).mean())
+        if share > config.crop_fill:  # the path departs from its frames by more than the smallest window
+            warnings.append(CROP_FILL_WARNING.format(scale=crop.scale, share=share, fill=config.crop_fill))
     elif config.mode == "crop":
         crop = warping.largest_crop(smoothed.orig_from_stab, width, height)
         if crop is None:

@@ -190,3 +190,25 @@ def test_the_command_lines_crop_mode_paths():
         assert planned(config(*options)) == ("auto", 30, 0.0), options
     assert planned(config("--path", "gaussian", "--crop-fill", "0")) == ("gaussian", 30, 0.0)
     assert planned(config("--path", "l1")) == ("l1", 30, 0.0)
+
+
+def test_a_path_too_far_from_its_frames_for_any_window_is_told():
+    """One frame seen 90 % of the width away from its neighbours (a glitch eq. 18 smooths over): even the smallest
+    window leaves that frame whole, more than the fill over 40 frames. The plan keeps that smallest window,
+    completes what it must, and says so in one warning."""
+    from pipeline.chain import CROP_FILL_WARNING, plan_path
+    from pipeline.results import MotionPass
+
+    n = 40
+    curr_from_prev = np.repeat(np.eye(3)[None], n, 0)
+    curr_from_prev[20, 0, 2], curr_from_prev[21, 0, 2] = 0.9 * W, -0.9 * W
+    motion = MotionPass(curr_from_prev, ["ok"] * n, [t / 30.0 for t in range(n)], [])
+    plan = plan_path(motion, StabilizeConfig(mode="crop", smoothing=smoothing.SmoothingConfig(radius_frames=60)), W, H)
+    assert plan.crop.scale == warping.FILL_MIN_SCALE
+    share = warping.window_share_outside(plan.smoothing.orig_from_stab, W, H, plan.crop.scale).mean()
+    assert share > DEFAULT_CROP_FILL
+    told = [w for w in plan.warnings if w.startswith(CROP_FILL_WARNING[:30])]
+    assert len(told) == 1 and f"{share:.1%}" in told[0]
+    calm = plan_path(MotionPass(np.repeat(np.eye(3)[None], n, 0), ["ok"] * n, [t / 30.0 for t in range(n)], []),
+                     StabilizeConfig(mode="crop"), W, H)
+    assert calm.crop.scale == 1.0 and not calm.warnings
