@@ -123,9 +123,8 @@ def _plan_views(motion_pass: MotionPass, config: StabilizeConfig, width: int, he
         return PathPlan(motion_pass, smoothed, smoothed.orig_from_stab @ adaptive.stab_from_out, None, warnings,
                         adaptive_crop=adaptive)
     if config.crop_fill > 0:  # a window that may leave the frames by the fill, completed there
-        crop = warping.window_for_fill(smoothed.orig_from_stab, width, height, config.crop_fill)
+        crop, share = warping.window_for_fill(smoothed.orig_from_stab, width, height, config.crop_fill)
         orig_from_out = smoothed.orig_from_stab @ crop.stab_from_out
-        share = float(warping.window_share_outside(smoothed.orig_from_stab, width, height, crop.scale).mean())
         if share > config.crop_fill:  # the path departs from its frames by more than the smallest window
             warnings.append(CROP_FILL_WARNING.format(scale=crop.scale, share=share, fill=config.crop_fill))
     elif config.mode == "crop":

@@ -66,7 +66,8 @@ def test_the_share_outside_matches_a_count_of_every_pixel():
 @pytest.mark.parametrize("fill", [0.0, 0.001, 0.003, 0.02])
 def test_the_window_is_the_largest_within_the_fill(fill):
     path = wandering_path(seed=1)
-    window = warping.window_for_fill(path, W, H, fill)
+    window, share = warping.window_for_fill(path, W, H, fill)
+    assert share == pytest.approx(warping.window_share_outside(path, W, H, window.scale).mean(), abs=1e-9)
     centre = np.array([(W - 1) / 2.0, (H - 1) / 2.0])
     np.testing.assert_allclose(window.stab_from_out[:2, 2] + window.scale * centre, centre)  # centred
     assert 0.5 < window.scale < 1.0
@@ -77,7 +78,8 @@ def test_the_window_is_the_largest_within_the_fill(fill):
 
 
 def test_a_still_camera_keeps_the_whole_frame():
-    assert warping.window_for_fill(np.repeat(np.eye(3)[None], 10, 0), W, H, DEFAULT_CROP_FILL).scale == 1.0
+    window, share = warping.window_for_fill(np.repeat(np.eye(3)[None], 10, 0), W, H, DEFAULT_CROP_FILL)
+    assert window.scale == 1.0 and share == 0.0
 
 
 class _Keep(NullObserver):

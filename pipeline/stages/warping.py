@@ -185,10 +185,12 @@ def window_share_outside(orig_from_stab: np.ndarray, width: int, height: int, sc
                            .mean(axis=1) for i in range(0, len(orig_from_stab), FILL_CHUNK_FRAMES)])
 
 
-def window_for_fill(orig_from_stab: np.ndarray, width: int, height: int, fill: float) -> CropWindow:
+def window_for_fill(orig_from_stab: np.ndarray, width: int, height: int,
+                    fill: float) -> tuple[CropWindow, float]:
     """The largest centred window of the input's aspect ratio (a multiple of FILL_STEP, FILL_MIN_SCALE to 1) whose
     parts outside the input frames are at most ``fill`` of the output's pixels, averaged over the frames
-    (``window_share_outside``); completion fills them. Each point leaves at one scale (``_leaving_scales``), so the
+    (``window_share_outside``), and that share; completion fills them (more than ``fill`` only where even
+    FILL_MIN_SCALE's window leaves the frames by more). Each point leaves at one scale (``_leaving_scales``), so the
     share is a count of leaving scales below the window's: one histogram of them over the clip gives every window's
     share, in memory bounded by FILL_CHUNK_FRAMES."""
     steps = int(round(1.0 / FILL_STEP))
@@ -201,6 +203,7 @@ def window_for_fill(orig_from_stab: np.ndarray, width: int, height: int, fill: f
         total += leaving.size
     outside = np.cumsum(below)[:steps + 1] / max(total, 1)  # outside[i]: share leaving at scales below i step
     fitting = np.nonzero(outside <= fill + 1e-12)[0]
-    scale = max(float(fitting[-1]) * FILL_STEP if len(fitting) else 0.0, FILL_MIN_SCALE)
+    step = max(int(fitting[-1]) if len(fitting) else 0, int(round(FILL_MIN_SCALE / FILL_STEP)))
+    scale = step * FILL_STEP
     centre = ((width - 1) / 2.0, (height - 1) / 2.0)
-    return CropWindow(centre[0] * (1.0 - scale), centre[1] * (1.0 - scale), scale)
+    return CropWindow(centre[0] * (1.0 - scale), centre[1] * (1.0 - scale), scale), float(outside[step])
