@@ -30,23 +30,24 @@ HARD_CROP_RADIUS = smoothing.DEFAULT_RADIUS
 DEFAULT_CROP_FILL = 0.003
 
 
-def fixed_crop_window(crop: CropConfig) -> bool:
-    """Whether crop mode's window is one of its own choosing for the whole clip (not --crop adaptive or
-    --crop-scale): the only window that may leave the frames to be completed."""
-    return crop.kind == "fixed" and crop.scale is None
+def crop_window_inside(crop: CropConfig, *, l1: bool) -> bool:
+    """Whether crop mode keeps its window inside every frame (nothing synthesized): with --crop-fill 0, --crop-scale,
+    --crop adaptive, or a path the L1 program plans in the window (``l1``: the l1, tripod or auto path, here or in a
+    segment). Otherwise its window may leave the frames by the fill, to be completed."""
+    return crop.fill == 0 or crop.kind != "fixed" or crop.scale is not None or l1
 
 
 def default_path(mode: str, crop: CropConfig, *, l1_segments: bool = False) -> str:
     """The camera path of ``mode`` when none is given (crop mode: eq. 18 where its window may be completed, so not
     with ``l1_segments``, path segments planned by the L1 program in the window)."""
-    if mode == "crop" and (crop.fill == 0 or not fixed_crop_window(crop) or l1_segments):
+    if mode == "crop" and crop_window_inside(crop, l1=l1_segments):
         return HARD_CROP_PATH
     return DEFAULT_PATHS[mode]
 
 
 def default_radius(mode: str, path: str, crop: CropConfig, *, l1_segments: bool = False) -> int:
     """Eq. 18's k when none is given, for ``mode`` on ``path``."""
-    if mode == "crop" and (path != "gaussian" or crop.fill == 0 or not fixed_crop_window(crop) or l1_segments):
+    if mode == "crop" and crop_window_inside(crop, l1=l1_segments or path != "gaussian"):
         return HARD_CROP_RADIUS
     return DEFAULT_RADII[mode]
 
@@ -70,7 +71,7 @@ class StabilizeConfig:
             path = default_path(self.mode, self.crop)
             object.__setattr__(self, "smoothing", smoothing.SmoothingConfig(
                 path=path, radius_frames=default_radius(self.mode, path, self.crop)))
-        if self.crop.fill and not self._crop_may_fill:
+        if self.crop.fill and self._window_inside:
             raise ConfigError("--crop-fill needs --mode crop with eq. 18's path (--path gaussian) and a fixed window "
                               "of its own choosing: the l1, tripod and auto paths, --crop-scale and --crop adaptive "
                               "keep the window inside every frame")
@@ -86,14 +87,15 @@ class StabilizeConfig:
         return self.mode == "crop" or bool(paths & {"l1", "tripod"})
 
     @property
-    def _crop_may_fill(self) -> bool:
-        return self.mode == "crop" and fixed_crop_window(self.crop) and not self.smoothing.uses_l1
+    def _window_inside(self) -> bool:
+        """Whether no crop window leaves the frames: every mode but crop, and crop mode's window inside every frame."""
+        return self.mode != "crop" or crop_window_inside(self.crop, l1=self.smoothing.uses_l1)
 
     @property
     def crop_fill(self) -> float:
         """The share of the output's pixels (mean over the clip) crop mode's window may leave the frames by, to be
         completed (0 in every other case)."""
-        if not self._crop_may_fill:
+        if self._window_inside:
             return 0.0
         return DEFAULT_CROP_FILL if self.crop.fill is None else self.crop.fill
 
