@@ -1,7 +1,8 @@
 """The one definition of what happens to the whole path and to each frame, used by every runner (single process,
 segment-parallel, batch): ``plan_path`` turns pass 1's estimates into the path plan (eq. 18 or L1 smoothing,
 the output transform, the crop window), and ``FrameChain`` turns one frame and its window of neighbours into
-one FrameResult: warp (eq. 19) -> completion (chapter 4, full mode) -> deblurring (chapter 5) -> output.
+one FrameResult: warp (eq. 19) -> completion (chapter 4: full mode, and crop mode where its window leaves the frame)
+-> deblurring (chapter 5) -> output.
 
 Invariants: a frame's result depends only on the plan and the frames within ``config.window_frames`` of it
 (never on other frames' results), so frames can be rendered in any order, on threads or in segments, and come
@@ -218,7 +219,7 @@ class FrameChain:
         self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
                                        side="right") - 1
         self.keep = keep_intermediates
-        # full mode's temporal consistency (smoothed_stream) holds each frame's completed frame and mask (FrameResult.
+        # completion's temporal consistency (smoothed_stream) holds each frame's completed frame and mask (FrameResult.
         # completed) until the frames next to it are made, whether intermediates are kept or not
         self.temporal_radius = config.completion.temporal.radius if config.completing else 0
         self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
@@ -312,7 +313,7 @@ class FrameChain:
                            deblur=deblurred, cpu_seconds=cpu, completed=held)
 
     def smoothed_stream(self, results: Iterable[FrameResult]) -> Iterator[FrameResult]:
-        """Full mode's last step over the frames in order: each frame's synthesized pixels averaged with its
+        """Completion's last step over the frames in order: each frame's synthesized pixels averaged with its
         neighbours' completed frames (pipeline/stages/temporal.py), deblurring's change to them kept."""
         for window in sliding_window(results, self.temporal_radius):
             yield self._smoothed(window)

@@ -94,12 +94,12 @@ class FrameResult:
     output: np.ndarray  # the frame as written
     input: Frame | None = None
     warp: WarpResult | None = None  # the stabilized frame and its missing pixels (built in crop mode only when kept)
-    completion: CompletionResult | None = None  # full mode
+    completion: CompletionResult | None = None  # full mode, and crop mode's frames its window leaves
     deblur: DeblurResult | None = None  # where deblurring runs
-    # full mode: the synthesized pixels averaged with the neighbouring completed frames (the output has them, with
-    # deblurring's change added)
+    # where completion ran: the synthesized pixels averaged with the neighbouring completed frames (the output has
+    # them, with deblurring's change added)
     temporal: TemporalResult | None = None
-    # full mode: completion's frame and its synthesized pixels, held only until the frames next to it are made
+    # where completion ran: its frame and its synthesized pixels, held only until the frames next to it are made
     # temporally consistent (without completion's other intermediates, which a run that does not record drops)
     completed: CompletedFrame | None = None
     cpu_seconds: dict[str, float] = field(default_factory=dict)  # this thread's CPU time per stage
