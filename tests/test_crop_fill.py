@@ -103,14 +103,8 @@ class _Keep(NullObserver):
 
 
 def _view_jitter(video, orig_from_out: np.ndarray) -> float:
-    """Residual jitter (px) of the output's view centre in the world, per unit of the window (as the output shows
-    it)."""
-    view = []
-    for t, m in enumerate(orig_from_out):
-        world_from_out = np.linalg.inv(video.frame_from_world[t]) @ m
-        x, y = (world_from_out @ np.array([(W - 1) / 2.0, (H - 1) / 2.0, 1.0]))[:2]
-        view.append((x, y, math.atan2(world_from_out[1, 0], world_from_out[0, 0])))
-    return metrics.residual_jitter(np.array(view), 30.0)[0]
+    """Residual jitter (px) of the output's view centre in the world."""
+    return metrics.residual_jitter(video.view_path(orig_from_out), 30.0)[0]
 
 
 @pytest.mark.parametrize("kind, seed", [("person", 0), ("disc", 1)])

@@ -283,12 +283,7 @@ def test_crop_mode_default_path_prices_the_shake_and_is_steadier_in_the_world(se
 
     def jitter_and_kept(plan) -> tuple[float, float, float]:
         kept = float(np.sqrt(np.abs(np.linalg.det(plan.orig_from_out[:, :2, :2]))).mean())
-        view = []
-        for frame_from_world, orig_from_out in zip(video.frame_from_world, plan.orig_from_out):
-            world_from_out = np.linalg.inv(frame_from_world) @ orig_from_out
-            x, y = (world_from_out @ CENTRE)[:2]
-            view.append((x, y, math.atan2(world_from_out[1, 0], world_from_out[0, 0])))
-        px, deg = metrics.residual_jitter(np.array(view), 30.0)
+        px, deg = metrics.residual_jitter(video.view_path(plan.orig_from_out), 30.0)
         return px / kept, deg, kept
 
     auto = plan_path(motion_pass, StabilizeConfig(mode="crop", crop=HARD_CROP), W, H)

@@ -231,6 +231,17 @@ class SyntheticVideo:
         cov = warp(ones, view_from_world, self.size, interpolation=cv2.INTER_NEAREST, border_value=0)
         return cov > 0
 
+    def view_path(self, orig_from_out: np.ndarray) -> np.ndarray:
+        """(N, 3): where the outputs of ``orig_from_out`` (one transform a frame: output pixel -> input pixel) look at
+        in the world: their centre's x and y (world px) and their roll (radians), for metrics.residual_jitter."""
+        centre = np.array([(self.config.width - 1) / 2.0, (self.config.height - 1) / 2.0, 1.0])
+        path = []
+        for frame_from_world, m in zip(self.frame_from_world, orig_from_out):
+            world_from_out = np.linalg.inv(frame_from_world) @ m
+            x, y, w = world_from_out @ centre
+            path.append((x / w, y / w, math.atan2(world_from_out[1, 0], world_from_out[0, 0])))
+        return np.array(path)
+
     def frame_coverage(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
         """bool (H, W): where a view ``view_from_frame`` of frame t sees pixels inside input frame t
         (False = region a full-frame method must complete from other frames)."""
