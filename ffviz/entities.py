@@ -83,7 +83,8 @@ COMPLETION_SOURCE = "completion/source"  # how each pixel was filled: Completion
 COMPLETION_FRAME = "completion/frame"
 COMPLETION_STATS = "completion/stats"  # /missing and /<each completion.SOURCE_NAMES but original>: share of the frame
 # The mean share of the synthesized pixels' values averaged in from the neighbouring completed frames (temporal
-# consistency, pipeline/stages/temporal.py): a chart of its own (0.3-0.6 where the shares of the frame are 0.0x)
+# consistency, pipeline/stages/temporal.py): a chart of its own, its values an order of magnitude above the shares
+# of the frame charted beside them
 COMPLETION_TEMPORAL = "completion/temporal"
 
 DEBLUR_BLURRINESS = "deblur/blurriness"  # b_t (eq. 28), every frame

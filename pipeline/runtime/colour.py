@@ -47,11 +47,10 @@ PQ, HLG = 16, 18
 # FFmpeg's default for untagged video, and tagged so.
 _SWS_MATRIX = {1: 1, 4: 4, 5: 5, 6: 5, 7: 7, 9: 9, 10: 9}
 # Planar 4:2:0 (nearly all video) is converted here, exactly and at its chroma location (from_rgb, _yuv420_to_rgb):
-# swscale with these flags takes chroma as sited at the centre (measured on ramps: 0.51, 0.49 luma px), half a pixel
-# right of H.264/HEVC's default, and PyAV cannot tell it otherwise. Other layouts go through swscale with these
-# flags. Measured on a smooth colour image: swscale's defaults read 8-bit BT.709 limited range ~1.2 levels dark (these
-# flags: 0.0); its 10-bit paths are ~0.4% off in gain both ways, and full chroma interpolation misreads 10-bit
-# input, so it is for 8 bits only.
+# swscale with these flags takes chroma as sited at the centre, half a pixel right of H.264/HEVC's default, and PyAV
+# cannot tell it otherwise. Other layouts go through swscale with these flags, which read 8-bit levels right where its
+# defaults do not; its 10-bit paths are off in gain, and full chroma interpolation misreads 10-bit input, so it is
+# for 8 bits only (measurements: docs/colour.md; docs/decisions.md D15, D20).
 _FLAGS_8 = Interpolation.BILINEAR | Interpolation.ACCURATE_RND | Interpolation.FULL_CHR_H_INT | \
     Interpolation.FULL_CHR_H_INP
 _FLAGS_DEEP = Interpolation.BICUBIC | Interpolation.ACCURATE_RND

@@ -706,8 +706,8 @@ class Encoding:
     ``h264``: x264 at constant quality ``crf`` (0-51, lower is better) with its speed/size ``preset``; High 10
     for deeper input. ``hevc``: x265 (Main, Main 10 or Main 12 by the input's depth), the same two settings.
     ``mpeg4``: FFmpeg's MPEG-4 Part 2 encoder, which OpenCV's XVID writer uses, at the fixed quantiser
-    ``qscale`` (2-31, lower is better): ~10x less CPU than x264 medium for more bits (vplab_C against CRF 18:
-    q 3 1.6x the bits at -1.1 dB PSNR, q 2 2.5x at +0.5 dB).
+    ``qscale`` (2-31, lower is better): far less CPU than x264 medium, paid for in bits at a like quality, which
+    is why OpenCV's sample writes it (figures: docs/benchmarks-speed.md, "From the decision log").
     """
 
     codec: str = "auto"
@@ -837,7 +837,7 @@ class VideoWriter:
         self._colour, self._pix_fmt = colour, "yuv420p" if depth == 8 else f"yuv420p{depth}le"
         stream = self._container.add_stream(_ENCODERS[codec], rate=fps, options=options)
         # PyAV asks for slice threads by default, so x264 would cut each frame into a slice per thread; AUTO lets it
-        # use frame threads as the ffmpeg command line does (one slice a frame; the same CPU: docs/benchmarks-speed.md)
+        # use frame threads as the ffmpeg command line does (one slice a frame, the same CPU: docs/decisions.md D18)
         stream.codec_context.thread_type = "AUTO"
         # yuv420p halves chroma, so H.264 needs even sizes (its crop step is 2 pixels too). An odd
         # side is padded by one replicated edge pixel: the output is at most 1 px wider/taller,

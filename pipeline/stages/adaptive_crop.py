@@ -23,7 +23,7 @@ import numpy as np
 from pipeline import geometry
 from pipeline.errors import ConfigError
 
-DEFAULT_ZOOM_SPEED = 0.1  # % of the frame's size a frame (vid.stab's zoomspeed defaults to 0.25: see docs/decisions.md)
+DEFAULT_ZOOM_SPEED = 0.1  # % of the frame's size a frame; vid.stab's 0.25 zooms visibly (docs/decisions.md D16)
 SMOOTH_RADIUS = 30  # frames of erosion and of Gaussian smoothing (a second at 30 fps)
 MIN_SCALE = 0.05  # a frame whose window about the anchor would be smaller than this has no usable crop
 EDGE_SLACK = 1e-3  # the window is kept this fraction inside its largest valid size (bilinear reads at the edge)

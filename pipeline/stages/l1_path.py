@@ -44,15 +44,13 @@ TRIPOD_MARGIN_DEG = 4.0
 TRIPOD_MARGIN_SCALE = 0.08
 CROP_EDGE_PX = 0.5  # the crop window's corners are kept this far inside the input frame's outer pixel centres
 # The shake term is priced on every SHAKE_STRIDE-th frame (at SHAKE_STRIDE times the weight) and its fit reaches
-# SHAKE_REACH sigmas: the shake of neighbouring frames overlaps over the fit's half second, and on the shared clips
-# both cut the program's time at the same steadiness (dfkimera_shaky, 916 frames, x and y priced: planning 5.9 ->
-# 3.7 CPU s).
+# SHAKE_REACH sigmas: the shake of neighbouring frames overlaps over the fit's half second, so both cut the program's
+# time at the same steadiness (docs/decisions.md D33).
 SHAKE_STRIDE = 2
 SHAKE_REACH = 2.5
 # The parameters whose shake is priced: rotation, x and y (indices into (s, r, x, y)). With x and y alone the program
-# bought translation room by turning the frames (shared clips: rotation jitter 0.36 -> 0.65 deg on linyihaolyh_shaky,
-# 0.49 -> 0.93 on vplab_C); the zoom is left to Grundmann et al.'s terms (priced too, dfkimera_shaky's output shook
-# more: 0.97x -> 1.01x vid.stab's jitter, predicted as in docs/decisions.md 2026-11-26).
+# bought translation room by turning the frames; the zoom is left to Grundmann et al.'s terms, since pricing its shake
+# too made the output shakier (docs/decisions.md D33).
 SHAKE_PARAMETERS = (1, 2, 3)
 
 

@@ -161,9 +161,7 @@ def _rescue_large_motions(flow: np.ndarray, target: np.ndarray, neighbour: np.nd
     twice as well as the flow (and below ``rescue_error``) take it. Writes into ``flow``.
 
     The search compares intensities, as the error that flags a region does: a third of the work of comparing
-    R, G and B, and the same completion (PSNR of the completed pixels, 32 frames, 8 scenes of the issue-6 check,
-    intensity minus RGB: coffee +0.15, rocket 0, astronaut -0.03, chelsea -0.09 dB; crops of linyihaolyh 0,
-    vplab_C +0.03, selh_tasc -0.01, small-shaky-5 0).
+    R, G and B, for completion as good on balance (docs/decisions.md D29; figures: docs/benchmarks-completion.md).
     """
     rows = np.flatnonzero(where.any(axis=1))
     if len(rows) == 0:

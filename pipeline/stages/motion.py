@@ -64,7 +64,7 @@ class MotionConfig:
     model: MotionModel = "affine"
     refine: Refinement = "none"
     max_side: int = 960  # estimation runs on frames downscaled to this longest side
-    max_corners: int = 300  # 600 gave the same output jitter on the shared clips for more CPU (benchmarks-speed.md)
+    max_corners: int = 300  # 600 cost more CPU for no steadier output, 200 shook more (docs/decisions.md D18)
     corner_quality: float = 0.003
     corner_min_distance: int = 8
     corner_grid: tuple[int, int] = (8, 5)  # corners are detected per cell (columns, rows), see _detect_corners

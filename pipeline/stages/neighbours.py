@@ -3,10 +3,10 @@
 Completion looks at a neighbour in few places: at the missing pixels (mosaic, eqs. 20-22), on a thin band of
 known pixels around them (the local alignment error), inside the small boxes where local flow is computed,
 and at p + F(p) for the local warp (eq. 25). Warping every neighbour over the whole frame (12 neighbours, two
-warps each) was 17% of full mode's time at 640x360 and grows with the frame's area; here each look warps or
-samples just what it needs, straight from the original frame. Whole frames (``rgb``, ``valid``) are warped on
-first use, once; deblurring warps only the colours itself and works out coverage from ``other_from_stab``
-(pipeline/stages/deblur.py).
+warps each) would cost in proportion to the frame's area, for pixels nobody looks at (docs/benchmarks-speed.md);
+here each look warps or samples just what it needs, straight from the original frame. Whole frames (``rgb``,
+``valid``) are warped on first use, once; deblurring warps only the colours itself and works out coverage from
+``other_from_stab`` (pipeline/stages/deblur.py).
 
 A pixel is valid when every bilinear tap of its sample lies inside the original frame (as the target's own
 missing mask in pipeline/stages/warping.py).

@@ -33,7 +33,7 @@ from pipeline.stages import warping
 from pipeline.stages.motion import MotionEstimate
 
 READOUT_GRID = np.round(np.linspace(0.0, 1.0, 21), 2)
-REFIT_ROUNDS = 2  # motion refits on corrected tracks: wobble on ground truth 0.46, 0.11, 0.095, 0.093 px² after 0-3
+REFIT_ROUNDS = 2  # motion refits on corrected tracks: a third hardly lowers the wobble (docs/decisions.md D17)
 FIXED_POINT_ITERATIONS = 3  # input row of an output pixel: the motion in one row's time is far below a pixel
 MIN_FIT_TRACKS = 12  # a pair's motion is refitted only on at least this many inlier tracks
 DEFAULT_BANDS = 8

@@ -13,7 +13,7 @@ with C_j frame j's completed frame, q_j = S_j^-1 M_(j<-t) S_t p the same scene p
 stabilized paths S and the global motion M: no estimation here), and d_j the largest channel difference between
 C_j(q_j) and C_t(p). Only points frame j synthesized too are averaged in: where q_j is one of j's real pixels,
 completion has already drawn on that frame, and taking its pixel as it is would bring its motion blur and the
-resampling's softness (-2 dB on the synthetic person clips). Samples that disagree by much more than sigma (a moving
+resampling's softness into the strip (docs/decisions.md D40). Samples that disagree by much more than sigma (a moving
 object, a step that is not flicker) leave frame t's own value. Real pixels are never changed; only frames of the
 same shot take part.
 
@@ -38,8 +38,8 @@ from pipeline.stages.neighbours import remap_points
 class TemporalConfig:
     radius: int = 1  # frames r on each side of t whose completed frames are averaged in; 0: off
     # Agreement scale (grey levels 0..255, largest channel difference): a neighbour's sample this far from frame t's
-    # own counts e^-1 as much, at twice this 2 %. Measured (docs/decisions.md 2026-11-27): 30 left selh_tasc's
-    # flicker at k = 60 at 1.45, 50 at 1.36; the person clips' completion margin held.
+    # own counts e^-1 as much, at twice this 2 %. Wide enough to average out the flicker between near-equal samples,
+    # narrow enough to leave a moving object's step alone (docs/decisions.md D40).
     sigma: float = 50.0
 
     def __post_init__(self) -> None:
@@ -91,8 +91,8 @@ def smooth(frame: np.ndarray, synthesized: np.ndarray, neighbours: Sequence[Comp
         mapped = neighbour.other_from_t @ points
         map_x, map_y = mapped[0] / mapped[2], mapped[1] / mapped[2]
         inside = (map_x >= 0) & (map_x <= width - 1) & (map_y >= 0) & (map_y <= height - 1)
-        # Bicubic: a bilinear sample is a little blurred, and averaging it in softened the texture of the synthetic
-        # scenes' strips by 0.2-0.55 dB; bicubic keeps them within 0.1 dB of frame t alone.
+        # Bicubic: a bilinear sample is a little blurred, and averaging it in would soften a textured strip; a
+        # bicubic one keeps it as sharp as frame t's own (docs/decisions.md D40).
         sample = remap_points(neighbour.frame, map_x, map_y, cv2.BORDER_REPLICATE,
                               interpolation=cv2.INTER_CUBIC).astype(np.float32)
         difference = np.abs(sample - own).max(axis=1)
