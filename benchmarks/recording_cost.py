@@ -1,135 +1,132 @@
-"""What a Rerun recording costs: run time with --record summary and --record full against no recording, and
-the .rrd's size per 100 frames, on a synthetic 640x360 clip (pipeline.evaluation.synthetic), in --mode none and full.
+"""What recording costs at the sizes phones record: `ffviz stabilize` with and without `--rrd`, CPU seconds and peak
+memory, side by side, at 640x360, 1080x1920 and 2160x3840 (and, with --long, 1000 frames of 1920x1080).
 
-Each configuration runs the whole library call (both passes, the output video written), interleaved
-(none, summary, full, none, ...) so that load on a shared machine spreads over all of them. Columns: wall
-seconds (the minimum over the runs, the estimate least disturbed by other jobs, and every run), the overhead
-of that minimum against no recording, CPU seconds of the process (all threads), and the recorder's time on
-the pipeline's thread: seconds spent inside its observer calls (handing results to its own thread, waiting
-when that one is behind, and closing, which waits for it and the SDK's writer), and its share of the run. On a loaded machine the wall-clock overhead swings by +-20 % from run to
-run; the recorder's own time does not. Summary recording should add at most 15 % (issue 5).
-Usage: python benchmarks/recording_cost.py [--frames 100] [--repeats 3] [--full-repeats 2] [--modes none,full]
-       [--clip ../shared/videos/vplab_C.avi]  (a real clip instead of the synthetic one)
+The large inputs are a shared clip centre-cropped to the aspect and scaled with Lanczos (as
+../shared/tools/phone-clips.sh makes them), made once into --work. Each run is its own child process measured from
+outside as `ffviz bench` measures (ffviz.bench.run_measured: CPU seconds of the process tree, peak RSS from wait4),
+plain and recorded in turn, --repeat times; the table shows medians. The bounds are issue 39's: the recording adds at
+most 30 % CPU at 640x360 and 1080p, and at most max(25 %, 600 MB) to the peak at every size. Writes its section of
+docs/benchmarks-recording.md (--no-report: print only).
+
+Usage: python benchmarks/recording_cost.py [--clip ../shared/videos/dfkimera_shaky.mp4] [--frames 120]
+       [--sizes 640x360,1080x1920,2160x3840] [--long] [--repeat 1] [--record-size 960] [--work bench_out/recording]
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
-import time
+import statistics
+import sys
+from fractions import Fraction
 from pathlib import Path
 
-os.environ.setdefault("RERUN_ANALYTICS", "0")
+import av
+import cv2
 
-from ffviz.recorder import RerunRecorder  # noqa: E402
-from pipeline.evaluation import synthetic  # noqa: E402
-from pipeline.stabilize import StabilizeConfig, stabilize  # noqa: E402
+from ffviz.bench import ffviz_command, run_measured
 
-LEVELS = (None, "summary", "full")
-SUMMARY_BUDGET = 0.15
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from speed_report import machine_line, write_section  # noqa: E402  (benchmarks/ is not a package)
 
-
-class TimedRecorder(RerunRecorder):
-    """The recorder, counting the seconds its observer calls take."""
-
-    seconds = 0.0
-
-    def _timed(self, method, *args) -> None:
-        started = time.perf_counter()
-        try:
-            method(*args)
-        finally:
-            self.seconds += time.perf_counter() - started
-
-    def on_start(self, info, config) -> None:
-        self._timed(super().on_start, info, config)
-
-    def on_motion(self, stamp, estimate) -> None:
-        self._timed(super().on_motion, stamp, estimate)
-
-    def on_path(self, plan) -> None:
-        self._timed(super().on_path, plan)
-
-    def on_frame(self, result) -> None:
-        self._timed(super().on_frame, result)
-
-    def on_warning(self, stamp, message) -> None:
-        self._timed(super().on_warning, stamp, message)
-
-    def on_finish(self, report) -> None:
-        self._timed(super().on_finish, report)
+VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+REPORT = Path(__file__).resolve().parents[1] / "docs" / "benchmarks-recording.md"
+CPU_BOUND = 1.30  # at 640x360 and 1080p
+PEAK_SHARE, PEAK_FLOOR_MB = 0.25, 600.0
+CPU_BOUNDED_PIXELS = 1920 * 1080  # the CPU bound holds up to 1080p
 
 
-CPU_SECONDS: dict[tuple[str, str | None], list[float]] = {}
+def scaled_clip(source: Path, out: Path, width: int, height: int, frames: int) -> Path:
+    """The first ``frames`` frames of ``source``, centre-cropped to width:height and scaled (Lanczos), H.264."""
+    if out.is_file():
+        return out
+    temp = out.with_name(f".{out.name}.tmp.mp4")
+    with av.open(str(source)) as reader, av.open(str(temp), "w") as writer:
+        rate = reader.streams.video[0].average_rate or Fraction(30)
+        stream = writer.add_stream("libx264", rate=rate)
+        stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+        stream.options = {"crf": "18", "preset": "veryfast"}
+        for index, frame in enumerate(reader.decode(video=0)):
+            if index >= frames:
+                break
+            rgb = frame.to_ndarray(format="rgb24")
+            h, w = rgb.shape[:2]
+            crop_w, crop_h = min(w, round(h * width / height)), min(h, round(w * height / width))
+            x0, y0 = (w - crop_w) // 2, (h - crop_h) // 2
+            resized = cv2.resize(rgb[y0:y0 + crop_h, x0:x0 + crop_w], (width, height), interpolation=cv2.INTER_LANCZOS4)
+            writer.mux(stream.encode(av.VideoFrame.from_ndarray(resized, format="rgb24")))
+        writer.mux(stream.encode(None))
+    temp.replace(out)
+    return out
 
 
-def run_once(clip: Path, folder: Path, mode: str, level: str | None) -> tuple[float, float, int]:
-    """Wall seconds of one run, seconds inside the recorder, and the recording's size in bytes (CPU seconds of
-    the process, all threads, go to CPU_SECONDS)."""
-    rrd = folder / f"{mode}_{level}.rrd"
-    recorder = TimedRecorder(rrd, level=level) if level else None
-    started, cpu_started = time.perf_counter(), time.process_time()
-    stabilize(clip, folder / f"{mode}.mp4", StabilizeConfig(mode=mode), observer=recorder, overwrite=True)
-    seconds = time.perf_counter() - started
-    CPU_SECONDS.setdefault((mode, level), []).append(time.process_time() - cpu_started)
-    return seconds, recorder.seconds if recorder else 0.0, rrd.stat().st_size if level else 0
+def measure(clip: Path, work: Path, repeat: int, record_size: str) -> dict[str, list]:
+    """Plain and recorded runs in turn: {'plain': [ChildRun...], 'rrd': [...]}, and the recording's bytes."""
+    runs: dict[str, list] = {"plain": [], "rrd": [], "rrd_bytes": []}
+    rrd = work / f"{clip.stem}.rrd"
+    for _ in range(repeat):
+        for kind in ("plain", "rrd"):
+            command = ffviz_command(clip, work / f"{clip.stem}.{kind}.mp4", "full")
+            if kind == "rrd":
+                command += ["--rrd", str(rrd), "--record-size", record_size]
+            run = run_measured(command)
+            if run.returncode != 0:
+                raise SystemExit(f"{' '.join(command)} failed: {run.output_tail}")
+            runs[kind].append(run)
+            if kind == "rrd":
+                runs["rrd_bytes"].append(rrd.stat().st_size)
+    return runs
 
 
-def main() -> None:
+def row(name: str, frames: int, pixels: int, runs: dict[str, list]) -> tuple[str, bool]:
+    med = lambda kind, field: statistics.median(getattr(r, field) for r in runs[kind])  # noqa: E731
+    cpu_plain, cpu_rrd = med("plain", "cpu_seconds"), med("rrd", "cpu_seconds")
+    peak_plain, peak_rrd = med("plain", "peak_rss_bytes") / 2**20, med("rrd", "peak_rss_bytes") / 2**20
+    cpu_ratio = cpu_rrd / cpu_plain
+    peak_allowed = max(peak_plain * PEAK_SHARE, PEAK_FLOOR_MB)
+    cpu_ok = cpu_ratio <= CPU_BOUND or pixels > CPU_BOUNDED_PIXELS
+    peak_ok = peak_rrd - peak_plain <= peak_allowed
+    size_mb = statistics.median(runs["rrd_bytes"]) / 1e6
+    cpu_note = f"{cpu_ratio:.2f}x" + ("" if pixels <= CPU_BOUNDED_PIXELS else " (no bound)")
+    line = (f"| {name} | {frames} | {cpu_plain:.1f} | {cpu_rrd:.1f} | {cpu_note} | {peak_plain:.0f} | {peak_rrd:.0f} | "
+            f"{peak_rrd - peak_plain:+.0f} (bound +{peak_allowed:.0f}) | {size_mb:.1f} ({size_mb / frames:.3f}/frame) | "
+            f"{'met' if cpu_ok and peak_ok else 'NOT MET'} |")
+    return line, cpu_ok and peak_ok
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=100)
-    parser.add_argument("--repeats", type=int, default=3, help="runs per configuration in --mode none")
-    parser.add_argument("--full-repeats", type=int, default=2, help="runs per configuration in --mode full (slow)")
-    parser.add_argument("--modes", default="none,full")
-    parser.add_argument("--clip", type=Path, default=None, help="a real clip instead of the synthetic one")
-    args = parser.parse_args()
-
-    with tempfile.TemporaryDirectory(prefix="ffviz-recording-cost-") as tmp:
-        folder = Path(tmp)
-        if args.clip is not None:
-            from pipeline.runtime.video_io import count_frames
-
-            clip = args.clip
-            args.frames = count_frames(clip)
-            print(f"clip {clip}: {args.frames} frames; os.cpu_count() = {os.cpu_count()}, "
-                  f"load average {os.getloadavg()[0]:.1f}")
-        else:
-            clip = folder / "shaky.mp4"
-            synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(n_frames=args.frames, seed=0)), clip)
-            print(f"synthetic clip: {args.frames} frames of 640x360; os.cpu_count() = {os.cpu_count()}, "
-                  f"load average {os.getloadavg()[0]:.1f}")
-        run_once(clip, folder, "none", None)  # warm-up: numba compilation, codec start-up
-        print("| mode | recording | wall s: min (runs) | overhead | CPU s: min | recorder s (share of run) | "
-              ".rrd MB per frame |")
-        print("|---|---|---|---|---|---|---|")
-        for mode in args.modes.split(","):
-            repeats = args.repeats if mode != "full" else args.full_repeats
-            wall: dict[str | None, list[float]] = {level: [] for level in LEVELS}
-            inside: dict[str | None, list[tuple[float, float]]] = {level: [] for level in LEVELS}
-            sizes: dict[str | None, int] = {}
-            for _ in range(repeats):
-                for level in LEVELS:
-                    seconds, recorder_seconds, sizes[level] = run_once(clip, folder, mode, level)
-                    wall[level].append(seconds)
-                    inside[level].append((recorder_seconds, seconds))
-            base = min(wall[None])
-            for level in LEVELS:
-                fastest = min(wall[level])
-                runs = ", ".join(f"{s:.1f}" for s in wall[level])
-                overhead = "-" if level is None else f"{fastest / base - 1:+.1%}"
-                own_seconds, run_seconds = max(inside[level], key=lambda pair: pair[0] / pair[1])  # the worst run
-                own = "-" if level is None else f"{own_seconds:.2f} ({own_seconds / run_seconds:.1%})"
-                size = "-" if level is None else f"{sizes[level] / 1e6 / args.frames:.3f}"
-                cpu = min(CPU_SECONDS[mode, level])
-                print(f"| {mode} | {level or 'no recording'} | {fastest:.1f} ({runs}) | {overhead} | {cpu:.1f} | {own} "
-                      f"| {size} |", flush=True)
-            share = max(own / run for own, run in inside["summary"])
-            wall_overhead = min(wall["summary"]) / base - 1
-            verdict = "within" if share <= SUMMARY_BUDGET else "OVER"
-            print(f"  mode {mode}: the summary recorder takes {share:.1%} of the run ({verdict} the "
-                  f"{SUMMARY_BUDGET:.0%} budget); wall-clock overhead of the fastest runs {wall_overhead:+.1%}")
+    parser.add_argument("--clip", type=Path, default=VIDEOS / "dfkimera_shaky.mp4")
+    parser.add_argument("--frames", type=int, default=120)
+    parser.add_argument("--sizes", default="640x360,1080x1920,2160x3840")
+    parser.add_argument("--long", action="store_true", help="also 1000 frames of 1920x1080")
+    parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--record-size", default="960")
+    parser.add_argument("--work", type=Path, default=Path("bench_out/recording"))
+    parser.add_argument("--no-report", action="store_true")
+    args = parser.parse_args(argv)
+    args.work.mkdir(parents=True, exist_ok=True)
+    inputs = [(size, args.frames) for size in args.sizes.split(",") if size]
+    if args.long:
+        inputs.append(("1920x1080", 1000))
+    lines = ["## recording_cost.py: plain against `--rrd`, full mode, CPU and peak memory", "",
+             f"{machine_line()}; input: {args.clip.name} cropped and scaled; recorded at `--record-size "
+             f"{args.record_size}`; medians of {args.repeat} run(s) each, plain and recorded in turn.", "",
+             "| input | frames | plain CPU s | --rrd CPU s | CPU ratio (bound 1.30) | plain peak MB | --rrd peak MB | "
+             "peak added MB | .rrd MB | bounds |", "|---|---|---|---|---|---|---|---|---|---|"]
+    print("\n".join(lines), flush=True)
+    all_met = True
+    for size, frames in inputs:
+        width, height = (int(v) for v in size.split("x"))
+        clip = scaled_clip(args.clip, args.work / f"{args.clip.stem}-{size}-{frames}.mp4", width, height, frames)
+        line, met = row(size, frames, width * height, measure(clip, args.work, args.repeat, args.record_size))
+        all_met &= met
+        lines.append(line)
+        print(line, flush=True)
+    lines += ["", "Every bound met." if all_met else "Some bound NOT met (rows marked)."]
+    if not args.no_report:
+        print(f"wrote {write_section('recording_cost', chr(10).join(lines), REPORT)}")
+    return 0 if all_met else 1
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
+from ffviz.recording.view import RECORD_SIZE
 from pipeline.runtime import memory, segments, video_io
 from pipeline import stabilize as stab
 from pipeline.errors import ConfigError, FFVizError, InputError
@@ -37,6 +38,7 @@ class VideoJob:
     rrd: Path | None = None
     record_level: str = "summary"
     jpeg_quality: int | None = 80
+    record_size: int | None = RECORD_SIZE  # the recorded pictures' long side; None: the input's size
 
     def settings(self) -> str:
         """What the output depends on besides the input file (compared on re-runs)."""
@@ -123,7 +125,7 @@ def _recorder(job: VideoJob):
         return None
     from ffviz.recorder import RerunRecorder
 
-    return RerunRecorder(job.rrd, level=job.record_level, jpeg_quality=job.jpeg_quality)
+    return RerunRecorder(job.rrd, level=job.record_level, jpeg_quality=job.jpeg_quality, record_size=job.record_size)
 
 
 def stabilize_one(job: VideoJob, segment_frames: int = 0, mapper: segments.Mapper | None = None) -> VideoResult:
@@ -311,7 +313,8 @@ def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: 
         rrd_dir = outdir / "recordings" if args.rrd == Path("AUTO") else args.rrd
     return [VideoJob(i.absolute(), o.absolute(), config, encoding=encoding,
                      rrd=(rrd_dir / f"{i.stem}.rrd").absolute() if rrd_dir else None,
-                     record_level=args.record, jpeg_quality=None if args.lossless else 80)
+                     record_level=args.record, jpeg_quality=None if args.lossless else 80,
+                     record_size=args.record_size)
             for i, o in zip(inputs, output_paths(inputs, outdir))]
 
 

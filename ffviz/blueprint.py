@@ -94,25 +94,21 @@ def _stage_stepping_tab(traced: Sequence[int]) -> rrb.Container:
     return rrb.Vertical(rrb.Horizontal(*stages), rrb.Horizontal(*fmm), name="stage stepping")
 
 
-def overview_tab() -> rrb.Container:
-    return rrb.Vertical(
-        rrb.Horizontal(
-            _image("input", ent.INPUT_FRAME),
-            _image("output (stabilized, completed, deblurred)", ent.OUTPUT_FRAME),
-        ),
-        rrb.Horizontal(
-            _trajectory_view(("x", "y"), "px"),
-            _trajectory_view(("angle",), "deg"),
-            _note("overview"),
-            column_shares=[2, 2, 1.4],
-        ),
-        row_shares=[3, 2],
-        name="overview",
-    )
+def overview_tab(portrait: bool = False) -> rrb.Container:
+    """``portrait``: frames taller than wide, side by side with the charts beside them (below, they would be
+    narrow columns in wide panels)."""
+    frames = (_image("input", ent.INPUT_FRAME), _image("output (stabilized, completed, deblurred)", ent.OUTPUT_FRAME))
+    paths = (_trajectory_view(("x", "y"), "px"), _trajectory_view(("angle",), "deg"), _note("overview"))
+    if portrait:
+        return rrb.Horizontal(*frames, rrb.Vertical(*paths, row_shares=[2, 2, 1.4]), column_shares=[2, 2, 2.4],
+                              name="overview")
+    return rrb.Vertical(rrb.Horizontal(*frames), rrb.Horizontal(*paths, column_shares=[2, 2, 1.4]),
+                        row_shares=[3, 2], name="overview")
 
 
-def motion_tab(rolling_shutter: bool = False) -> rrb.Container:
-    """``rolling_shutter``: a --rolling-shutter run, whose skew gets a chart (empty otherwise)."""
+def motion_tab(rolling_shutter: bool = False, portrait: bool = False) -> rrb.Container:
+    """``rolling_shutter``: a --rolling-shutter run, whose skew gets a chart (empty otherwise); ``portrait``: frames
+    taller than wide, given a narrower panel."""
     skew_chart = [rrb.TimeSeriesView(name="rolling shutter: bottom band's shift against the top's (px)",
                                      origin=f"/{ent.ROLLING_SHUTTER_SKEW}")] if rolling_shutter else []
     return rrb.Vertical(
@@ -129,6 +125,7 @@ def motion_tab(rolling_shutter: bool = False) -> rrb.Container:
                 *skew_chart,
                 row_shares=[3, 2, 2][:2 + len(skew_chart)],
             ),
+            column_shares=[2, 3] if portrait else [1, 1],
         ),
         _note("motion"),
         row_shares=[5, 1],
@@ -136,26 +133,25 @@ def motion_tab(rolling_shutter: bool = False) -> rrb.Container:
     )
 
 
-def smoothing_tab(crop: bool = False) -> rrb.Container:
-    """``crop``: a --mode crop run, whose crop scale and crop-window room get charts (empty in the other modes)."""
+def smoothing_tab(crop: bool = False, portrait: bool = False) -> rrb.Container:
+    """``crop``: a --mode crop run, whose crop scale and crop-window room get charts (empty in the other modes);
+    ``portrait``: frames taller than wide, side by side (stacked, they would be small)."""
     crop_charts = [rrb.TimeSeriesView(name="crop scale", origin=f"/{ent.CROP_SCALE}"),
                    rrb.TimeSeriesView(name="crop window's room in the input, px (< 0: completed there)",
                                       origin=f"/{ent.CROP_ROOM}")] if crop else []
+    paths = rrb.Vertical(_trajectory_view(("x",), "px"), _trajectory_view(("y",), "px"),
+                         _trajectory_view(("angle",), "deg"), _trajectory_view(("zoom",), "%"), *crop_charts)
+    frames = (_image("stabilized (eq. 19); crop window in yellow (--mode crop)", ent.STABILIZED_FRAME, ent.CROP_WINDOW),
+              _image("missing area (red)", ent.STABILIZED_FRAME, ent.STABILIZED_MISSING, ent.CROP_WINDOW),
+              _image("input; the output's corners in yellow (--mode crop: the crop-window constraint)",
+                     ent.INPUT_FRAME, ent.CROP_CONSTRAINT))
+    key = _key("missing", "missing area")
+    if portrait:
+        return rrb.Vertical(rrb.Horizontal(*frames, paths, column_shares=[2, 2, 2, 3]),
+                            rrb.Horizontal(key, _note("smoothing"), column_shares=[1, 3]),
+                            row_shares=[5, 1], name="smoothing")
     return rrb.Vertical(
-        rrb.Horizontal(
-            rrb.Vertical(_trajectory_view(("x",), "px"), _trajectory_view(("y",), "px"),
-                         _trajectory_view(("angle",), "deg"), _trajectory_view(("zoom",), "%"), *crop_charts),
-            rrb.Vertical(
-                _image("stabilized (eq. 19); crop window in yellow (--mode crop)", ent.STABILIZED_FRAME,
-                       ent.CROP_WINDOW),
-                _image("missing area (red)", ent.STABILIZED_FRAME, ent.STABILIZED_MISSING,
-                       ent.CROP_WINDOW),
-                _key("missing", "missing area"),
-                _image("input; the output's corners in yellow (--mode crop: the crop-window constraint)",
-                       ent.INPUT_FRAME, ent.CROP_CONSTRAINT),
-                row_shares=[4, 4, 1.6, 4],
-            ),
-        ),
+        rrb.Horizontal(paths, rrb.Vertical(frames[0], frames[1], key, frames[2], row_shares=[4, 4, 1.6, 4])),
         _note("smoothing"),
         row_shares=[5, 1],
         name="smoothing",
@@ -182,25 +178,28 @@ def mosaic_tab() -> rrb.Container:
     )
 
 
-def inpainting_tab() -> rrb.Container:
+def inpainting_tab(portrait: bool = False) -> rrb.Container:
+    """``portrait``: frames taller than wide, all six pictures in one row (in two rows they would be small)."""
+    flow = rrb.Vertical(_image("local flow, 1st neighbour (eqs. 23-24)", ent.COMPLETION_FLOW_IMAGE,
+                               ent.COMPLETION_FLOW_ARROWS), row_shares=[1])
+    order = _map("Fast Marching visiting order", ent.COMPLETION_FMM_ORDER)
+    arrival = _map("Fast Marching arrival time T", ent.COMPLETION_FMM_ARRIVAL)
+    filled_by = _image("filled by (eq. 25)", ent.COMPLETION_FRAME, ent.COMPLETION_FILLED_BY)
+    filled_how = _image("filled how", ent.COMPLETION_FRAME, ent.COMPLETION_SOURCE)
+    completed = _image("completed", ent.COMPLETION_FRAME)
+    temporal = rrb.TimeSeriesView(name="temporal consistency", origin=f"/{ent.COMPLETION_TEMPORAL}")
+    keys = (_key("flow", "flow"), _key("filled_by", "filled by"), _key("source", "filled how"))
+    note = _note("local flow + motion inpainting")
+    if portrait:
+        side = rrb.Vertical(_key("fmm_order", "visiting order"), _key("fmm_arrival", "arrival time"), *keys, temporal,
+                            note)
+        return rrb.Horizontal(flow, order, arrival, filled_by, filled_how, completed, side,
+                              name="local flow + motion inpainting")
     return rrb.Vertical(
-        rrb.Horizontal(
-            rrb.Vertical(_image("local flow, 1st neighbour (eqs. 23-24)",
-                                ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS), row_shares=[1]),
-            rrb.Vertical(_map("Fast Marching visiting order", ent.COMPLETION_FMM_ORDER),
-                         _key("fmm_order", "visiting order"), row_shares=[2, 1]),
-            rrb.Vertical(_map("Fast Marching arrival time T", ent.COMPLETION_FMM_ARRIVAL),
-                         _key("fmm_arrival", "arrival time"), row_shares=[2, 1]),
-        ),
-        rrb.Horizontal(
-            _image("filled by (eq. 25)", ent.COMPLETION_FRAME, ent.COMPLETION_FILLED_BY),
-            _image("filled how", ent.COMPLETION_FRAME, ent.COMPLETION_SOURCE),
-            rrb.Vertical(_image("completed", ent.COMPLETION_FRAME),
-                         rrb.TimeSeriesView(name="temporal consistency",
-                                            origin=f"/{ent.COMPLETION_TEMPORAL}"), row_shares=[2, 1]),
-            rrb.Vertical(_key("flow", "flow"), _key("filled_by", "filled by"), _key("source", "filled how")),
-            _note("local flow + motion inpainting"),
-        ),
+        rrb.Horizontal(flow, rrb.Vertical(order, _key("fmm_order", "visiting order"), row_shares=[2, 1]),
+                       rrb.Vertical(arrival, _key("fmm_arrival", "arrival time"), row_shares=[2, 1])),
+        rrb.Horizontal(filled_by, filled_how, rrb.Vertical(completed, temporal, row_shares=[2, 1]),
+                       rrb.Vertical(*keys), note),
         name="local flow + motion inpainting",
     )
 
@@ -237,14 +236,15 @@ def about_tab(log: bool = True) -> rrb.Container:
 
 
 def default_blueprint(traced: Sequence[int] = (), *, crop: bool = False, rolling_shutter: bool = False,
-                      log: bool = True) -> rrb.Blueprint:
+                      log: bool = True, portrait: bool = False) -> rrb.Blueprint:
     """``traced``: the frames logged on the `stage`/`fmm_step` timelines (a view each); ``crop`` / ``rolling_shutter``:
     a --mode crop / --rolling-shutter run (their charts are shown; other runs have no data for them, and an empty
-    panel reads as a fault); ``log``: the run logged warnings or notes (their table is shown)."""
+    panel reads as a fault); ``log``: the run logged warnings or notes (their table is shown); ``portrait``: the
+    frames are taller than wide (the tabs with several frames lay them out side by side)."""
     return rrb.Blueprint(
         rrb.Tabs(
-            overview_tab(), motion_tab(rolling_shutter), smoothing_tab(crop), mosaic_tab(), inpainting_tab(), deblur_tab(),
-            _stage_stepping_tab(traced), about_tab(log),
+            overview_tab(portrait), motion_tab(rolling_shutter, portrait), smoothing_tab(crop, portrait), mosaic_tab(),
+            inpainting_tab(portrait), deblur_tab(), _stage_stepping_tab(traced), about_tab(log),
             active_tab=0,
         ),
         # Opens on frame 0, paused (without play_state the viewer starts on the last frame, playing).

@@ -15,6 +15,7 @@ import traceback
 from pathlib import Path
 from typing import Sequence
 
+from ffviz.recording.view import RECORD_SIZE, parse_record_size
 from ffviz.runner import DEFAULT_RECORDINGS, output_encoding, run_stabilize, stabilize_config
 from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (tests call cli.view_command)
 from pipeline.stages import adaptive_crop, deblur, motion, smoothing
@@ -179,6 +180,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _record_size(text: str) -> int | None:
+    try:
+        return parse_record_size(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def _frame_list(text: str) -> tuple[int, ...] | None:
     from ffviz.trace import parse_frame_list
 
@@ -303,6 +311,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "(default: %(default)s)")
     p.add_argument("--lossless", action="store_true",
                    help="record images losslessly (larger files) (default: JPEG at quality 80)")
+    p.add_argument("--record-size", type=_record_size, default=RECORD_SIZE, metavar="PX|full",
+                   help="long side in pixels of the recorded frames, masks and maps, or 'full' for the input's size; "
+                        "statistics and charts come from full resolution either way, traced frames (--frames) keep "
+                        "the input's size (default: %(default)s)")
     p.add_argument("--frames", type=_frame_list, default=None, metavar="T1,T2,...",
                    help="frame numbers (from 0) to follow through every stage in the recording (timelines 'stage' "
                         "and 'fmm_step'), or 'none' (default: 3 frames with missing area at --record full, none "

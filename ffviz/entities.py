@@ -4,6 +4,7 @@ FRAME_TIMELINE = "frame"
 VIDEO_TIME_TIMELINE = "video_time"
 
 META = "meta"
+SIZES = "meta/sizes"  # static: input_size and recorded_size, (width, height) each (the layout follows the aspect)
 LOG = "log"
 
 INPUT_FRAME = "input/frame"

@@ -123,13 +123,13 @@ class Recording:
         if column == "EncodedDepthImage:blob":
             return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         if column == "EncodedImage:blob" and data[:4].tobytes() == b"\x89PNG" and data[25] == 3:
-            # Paletted (ffviz.recorder.indexed_png): a class map's classes (the entity has a legend), else the
+            # Paletted (ffviz.recording.encoders.indexed_png): a class map's classes (the entity has a legend), else the
             # picture the viewer shows, RGBA (a colour-mapped float map; its values are at entities.map_values).
             indices, palette = _paletted_png(data.tobytes())
             return indices if self.annotation_colours(entity) else palette[indices]
         if column == "EncodedImage:blob" and data[:4].tobytes() == b"\x89PNG" and data[25] == 6:
             legend = self.annotation_colours(entity)
-            if legend:  # an RGBA class map (ffviz.recorder.palette_png): colours back to classes
+            if legend:  # an RGBA class map (ffviz.recording.encoders.palette_png): colours back to classes
                 bgra = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
                 rgba = bgra[..., [2, 1, 0, 3]].astype(np.uint32)
                 packed = (rgba[..., 0] << 24) | (rgba[..., 1] << 16) | (rgba[..., 2] << 8) | rgba[..., 3]
@@ -223,9 +223,14 @@ class Recording:
 
     def _frame_size(self, entity: str) -> tuple[int, int] | None:
         """(width, height) the recorder noted for a frame stream of odd size; None when it noted none."""
+        return self.size(entity, "frame_size")
+
+    def size(self, entity: str, field: str) -> tuple[int, int] | None:
+        """A (width, height) the recorder logged as ``field`` (AnyValues) at ``entity``, e.g. entities.SIZES'
+        input_size and recorded_size; None if it logged none."""
         for batch in self.batches.get(entity, []):
-            if "frame_size" in batch.schema.names:
-                values = [v for v in batch.column("frame_size").to_pylist() if v]
+            if field in batch.schema.names:
+                values = [v for v in batch.column(field).to_pylist() if v]
                 if values:
                     width, height = values[-1]
                     return int(width), int(height)
@@ -247,7 +252,7 @@ class Recording:
 
 def _paletted_png(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     """(uint8 indices, (256, 4) RGBA palette) of an 8-bit paletted PNG: decoded as the grey PNG it is but for its
-    colour type and palette chunks (the inverse of ffviz.recorder.indexed_png; OpenCV would expand the colours)."""
+    colour type and palette chunks (the inverse of ffviz.recording.encoders.indexed_png; OpenCV would expand the colours)."""
     palette = np.zeros((256, 4), np.uint8)
     palette[:, 3] = 255
     grey, offset = [data[:8]], 8

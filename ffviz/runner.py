@@ -165,7 +165,8 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
         from ffviz.recorder import RerunRecorder
 
         recorder = RerunRecorder(rrd_path, level=args.record, jpeg_quality=None if args.lossless else 80,
-                                 trace_frames=args.frames, live_url=live.grpc_url if live else None)
+                                 record_size=args.record_size, trace_frames=args.frames,
+                                 live_url=live.grpc_url if live else None)
     from ffviz import compare
 
     start_s, end_s = compare.preview_range(args)

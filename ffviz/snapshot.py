@@ -40,12 +40,15 @@ def tab_index(name: str) -> int:
 def layout_facts(recording: Path) -> tuple[list[int], dict[str, bool]]:
     """What the layout depends on: the frames the recording traced (a view each), and default_blueprint's flags
     for the options the run used and its log (told by data only those runs have: a crop scale, a rolling-shutter
-    skew, log lines)."""
+    skew, log lines) and for the frames' aspect (the input's size)."""
     from rerun.chunk import RrdReader
 
-    found, flags = set(), {"crop": False, "rolling_shutter": False, "log": False}
+    found, flags = set(), {"crop": False, "rolling_shutter": False, "log": False, "portrait": False}
     for chunk in RrdReader(str(recording)).stream().to_chunks():
         path = str(chunk.entity_path).strip("/")
+        if path == ent.SIZES:
+            size = chunk.to_record_batch().column("input_size").to_pylist()[-1]
+            flags["portrait"] = bool(size) and size[1] > size[0]
         parts = path.split("/")
         if len(parts) >= 2 and parts[0] == ent.TRACE and parts[1].isdigit():
             found.add(int(parts[1]))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
@@ -9,18 +11,18 @@ import numpy as np
 def flow_to_rgb(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndarray:
     """Middlebury-style colour coding: hue = direction, saturation = magnitude; NaN flow (none computed there) in
     NO_VALUE_COLOUR, the grey of every map's "no value" (no flow colour is grey: their value is always full)."""
-    valid = np.isfinite(flow).all(axis=-1)
-    fx = np.where(valid, flow[..., 0], 0.0).astype(np.float32)
-    fy = np.where(valid, flow[..., 1], 0.0).astype(np.float32)
+    fx, fy = flow[..., 0], flow[..., 1]
+    valid = np.isfinite(fx + fy)  # both components finite
+    fx = np.where(valid, fx, np.float32(0)).astype(np.float32, copy=False)
+    fy = np.where(valid, fy, np.float32(0)).astype(np.float32, copy=False)
     magnitude, angle = cv2.cartToPolar(fx, fy, angleInDegrees=True)
     scale = max_magnitude or max(float(np.percentile(magnitude[valid], 99)) if valid.any() else 1.0, 1e-3)
-    hsv = np.zeros((*flow.shape[:2], 3), np.uint8)
+    hsv = np.empty((*flow.shape[:2], 3), np.uint8)
     hsv[..., 0] = (angle / 2).astype(np.uint8)
-    hsv[..., 1] = np.clip(magnitude / scale * 255, 0, 255).astype(np.uint8)
-    hsv[..., 2] = 255
-    rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
-    rgb[~valid] = NO_VALUE_COLOUR
-    return rgb
+    # no value: no saturation at the grey's value, which HSV -> RGB turns into that grey
+    hsv[..., 1] = np.where(valid, np.clip(magnitude / scale * 255, 0, 255), 0).astype(np.uint8)
+    hsv[..., 2] = np.where(valid, np.uint8(255), np.uint8(NO_VALUE_COLOUR[0]))
+    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
 
 
 def sparse_arrows(flow: np.ndarray, step: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -89,6 +91,7 @@ def map_indices(values: np.ndarray, value_range: tuple[float, float], shown: np.
     return indices
 
 
+@functools.lru_cache(maxsize=16)
 def map_palette(colormap: str, *, levels: int = MAP_LEVELS) -> np.ndarray:
     """(256, 4) uint8 RGBA palette for map_indices: 0 transparent, 1..levels ``colormap`` (the colour keys'
     own, OpenCV's tables) from its lowest to its highest colour."""

@@ -16,7 +16,7 @@ import functools
 import itertools
 import threading
 import time
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from pipeline.config import StabilizeConfig
 from pipeline import geometry
@@ -206,7 +206,8 @@ class FrameChain:
     """One frame and its window -> one FrameResult. Safe to call from several threads at once: it only reads the
     window and the plan (the caches it keeps are locked)."""
 
-    def __init__(self, plan: PathPlan, config: StabilizeConfig, *, keep_intermediates: bool) -> None:
+    def __init__(self, plan: PathPlan, config: StabilizeConfig, *,
+                 keep: Callable[[FrameResult], FrameResult] | None) -> None:
         self.config = config
         self.rows = plan.rolling_shutter.rows if plan.rolling_shutter is not None else None
         self.curr_from_prev = (plan.motion.curr_from_prev if plan.rolling_shutter is None
@@ -218,7 +219,9 @@ class FrameChain:
         self.orig_from_uncropped = plan.smoothing.orig_from_stab if config.crop_fill > 0 else None
         self.shot_of = np.searchsorted(plan.smoothing.segment_starts, np.arange(len(self.orig_from_stab)),
                                        side="right") - 1
-        self.keep = keep_intermediates
+        # None: each frame's result holds only what the run needs; else a frame's full result goes through keep (an
+        # observer's Observer.keep) as soon as it is made, and the run holds what that returns
+        self.keep = keep
         # completion's temporal consistency (smoothed_stream) holds each frame's completed frame and mask (FrameResult.
         # completed) until the frames next to it are made, whether intermediates are kept or not
         self.temporal_radius = config.completion.temporal.radius if config.completing else 0
@@ -305,12 +308,14 @@ class FrameChain:
         stamp = Stamp(frame.index, frame.time_s)
         held = (temporal.CompletedFrame(completed.frame, completed.missing)
                 if self.temporal_radius and completed is not None else None)
-        if not self.keep:
+        if self.keep is None:
             return FrameResult(stamp, frame.pts, output, cpu_seconds=cpu, completed=held)
         if self.orig_from_uncropped is not None:
             stabilized = rolling_shutter.warp_frame(frame.rgb, self.orig_from_uncropped[t], rows)
-        return FrameResult(stamp, frame.pts, output, input=frame, warp=stabilized, completion=completed,
-                           deblur=deblurred, cpu_seconds=cpu, completed=held)
+        kept = self.keep(FrameResult(stamp, frame.pts, output, input=frame, warp=stabilized, completion=completed,
+                                     deblur=deblurred, cpu_seconds=cpu, completed=held))
+        lap("observers")  # the observers' digests (the same dict as kept.cpu_seconds)
+        return kept
 
     def smoothed_stream(self, results: Iterable[FrameResult]) -> Iterator[FrameResult]:
         """Completion's last step over the frames in order: each frame's synthesized pixels averaged with its
@@ -347,19 +352,21 @@ class FrameChain:
             output = output.copy()
             output[synthesized] = np.clip(result.output[synthesized] + change, 0, 255).astype(np.uint8)
         cpu = {**result.cpu_seconds, "temporal": time.thread_time() - clock}
-        if not self.keep:
+        if self.keep is None:
             return FrameResult(result.stamp, result.pts, output, cpu_seconds=cpu)
         return dataclasses.replace(result, output=output, temporal=smoothed, cpu_seconds=cpu, completed=None)
 
 
-def render_frames(source: FrameSource, plan: PathPlan, config: StabilizeConfig, *, keep_intermediates: bool,
-                  frames: range | None = None, workers: int = 1) -> Iterator[FrameResult]:
+def render_frames(source: FrameSource, plan: PathPlan, config: StabilizeConfig, *,
+                  keep: Callable[[FrameResult], FrameResult] | None, frames: range | None = None,
+                  workers: int = 1) -> Iterator[FrameResult]:
     """Pass 2: every frame's result, in frame order (``workers`` frames at once on threads; identical either way).
+    ``keep``: what of each frame's intermediates the run holds (FrameChain); None: none.
 
     ``frames``: only these (a segment); the window still reads ``config.window_frames`` frames either side of the
     range, and the frames temporal consistency averages in are rendered too (not returned), so each frame is what
     it is in a whole-video run."""
-    chain = FrameChain(plan, config, keep_intermediates=keep_intermediates)
+    chain = FrameChain(plan, config, keep=keep)
     margin = chain.temporal_radius
     with one_pass(source) as decoded:
         windows: Iterable[Windowed[video_io.Frame]] = sliding_window(decoded, config.window_frames)

@@ -10,7 +10,7 @@ no intermediates (segment-parallel runs send only the output across processes).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -103,3 +103,16 @@ class FrameResult:
     # temporally consistent (without completion's other intermediates, which a run that does not record drops)
     completed: CompletedFrame | None = None
     cpu_seconds: dict[str, float] = field(default_factory=dict)  # this thread's CPU time per stage
+    # What observers made of the intermediates as the frame was rendered (Observer.keep), by observer: each keeps its
+    # own digest (e.g. the recorder's pictures at a viewing size) so that the run need not hold the intermediates.
+    digests: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def has_intermediates(self) -> bool:
+        return any(part is not None for part in (self.input, self.warp, self.completion, self.deblur))
+
+    def without_intermediates(self) -> "FrameResult":
+        """What the run itself needs of this frame: the output, the frame held for temporal consistency, the
+        timings and the observers' digests (a run that records nothing keeps only these)."""
+        return FrameResult(self.stamp, self.pts, self.output, completed=self.completed, cpu_seconds=self.cpu_seconds,
+                           digests=self.digests)

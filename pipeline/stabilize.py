@@ -215,7 +215,7 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
     workers = parallel.default_workers() if workers is None else max(int(workers), 1)
     if workers > 1:
         source = PrefetchedSource(source)  # decoding overlaps the per-frame work
-    keep = not is_null(observer)
+    keep = None if is_null(observer) else observer.keep
 
     def motion_pass() -> MotionPass:
         return estimate_motion(source, config.motion, observer=observer, progress=progress,
@@ -226,7 +226,7 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
         description = "pass 2/2: warp + complete + encode" if config.completing else "pass 2/2: warp + encode"
         bar = progress(description, plan.motion.n_frames)
         try:
-            for result in render_frames(source, plan, config, keep_intermediates=keep, workers=workers):
+            for result in render_frames(source, plan, config, keep=keep, workers=workers):
                 yield result
                 bar.update()
         finally:

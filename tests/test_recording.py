@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import errno
 import fnmatch
 import os
 import typing
@@ -15,8 +16,11 @@ import pytest
 import rerun as rr
 
 import ffviz
-from ffviz import entities as ent, snapshot, trace, visual
-from ffviz.recorder import FILLED_BY_BASE, WEIGHTS_STEP, RerunRecorder
+from ffviz import cli, entities as ent, snapshot, trace, visual
+from ffviz.recorder import RerunRecorder
+from ffviz.recording import about, legends
+from ffviz.recording.digest import WEIGHTS_STEP
+from ffviz.recording.legends import FILLED_BY_BASE
 from ffviz.rrd import Recording
 from ffviz.viewer import rerun_executable
 from pipeline import geometry
@@ -26,6 +30,7 @@ from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_MOSAIC, SOURCE_NA
 from pipeline.stages.neighbours import WarpedNeighbour
 from pipeline.results import FrameResult, Stamp
 from pipeline.runtime.observer import Observers, StageCollector
+from pipeline.errors import OutputError
 from pipeline.stages.deblur import DeblurConfig, DeblurResult
 from pipeline.stages.motion import IgnoreRegion, MotionConfig
 from pipeline.stabilize import StabilizeConfig, stabilize
@@ -605,7 +610,8 @@ def test_option_charts_appear_for_runs_with_the_option_only_so_no_panel_stays_em
     rrd, recording, collector = compact_run
     log = bool(recording.batches.get(ent.LOG))
     assert log == bool(collector.warnings)  # this clip's run notes nothing but its warnings
-    assert snapshot.layout_facts(rrd) == (sorted(TRACED), {"crop": False, "rolling_shutter": False, "log": log})
+    assert snapshot.layout_facts(rrd) == (sorted(TRACED), {"crop": False, "rolling_shutter": False, "log": log,
+                                                          "portrait": False})
     assert not len(recording.scalars(ent.CROP_SCALE)[0]) and not len(recording.scalars(ent.CROP_ROOM)[0])
     layout = _embedded_layout(rrd)  # the recorder's own layout says the same
     assert ("warnings and notes" in layout) == log and "crop scale" not in layout and "frame 5: stages" in layout
@@ -650,22 +656,22 @@ def test_about_tab_names_the_settings_that_differ_from_the_defaults():
 
     config = StabilizeConfig(mode="crop", smoothing=SmoothingConfig(radius_frames=12),
                              deblur=dataclasses.replace(DeblurConfig(), enabled=False))
-    meta = RerunRecorder._meta_markdown(None, config)
+    meta = about.about_markdown(None, config)
     settings = meta.split("## Settings")[1].split("##")[0]
     assert "- mode: crop" in settings and "k = 12 frames" in settings
     assert "`smoothing.radius_frames = 12`" in settings and "`deblur.enabled = False`" in settings
     assert "`mode = 'crop'`" in settings and "motion." not in settings
     # Crop mode's auto path: the tab says which path it planned (the recorder has it from the plan).
     hard = StabilizeConfig(mode="crop", crop=CropConfig(fill=0.0))  # a window inside every frame: the auto path
-    auto = RerunRecorder._meta_markdown(None, hard, planned=("l1", "l1"))
+    auto = about.about_markdown(None, hard, planned=("l1", "l1"))
     assert "- auto chose: the L1 program in the crop window (`l1`)" in auto
     assert "a window every frame covers" in auto and "`crop.fill = 0.0`" in auto
     eq18 = ("gaussian", "gaussian:k=30")
-    fallback = RerunRecorder._meta_markdown(None, hard, planned=eq18)
+    fallback = about.about_markdown(None, hard, planned=eq18)
     assert "- auto chose: eq. 18's path (`gaussian:k=30`)" in fallback
-    assert "auto chose" not in RerunRecorder._meta_markdown(None, StabilizeConfig(), planned=eq18)
+    assert "auto chose" not in about.about_markdown(None, StabilizeConfig(), planned=eq18)
     # Crop mode's default: eq. 18's path, its window completed where it leaves the frames
-    filled = RerunRecorder._meta_markdown(None, StabilizeConfig(mode="crop"))
+    filled = about.about_markdown(None, StabilizeConfig(mode="crop"))
     assert "at most 0.30% of the pixels over the clip, completed there" in filled and "k = 60" in filled
 
 
@@ -738,10 +744,8 @@ def test_every_chart_line_has_its_own_name_and_colour(compact_run):
 
 
 def test_class_colours_are_distinct_so_masks_read_back_exactly():
-    from ffviz import recorder
-
-    for legend in (recorder.MISSING_LEGEND, recorder.ACCEPTED_LEGEND, recorder.FALLBACK_LEGEND, recorder.SOURCE_LEGEND,
-                   RerunRecorder._filled_by_legend(), RerunRecorder._deblur_source_legend()):
+    for legend in (legends.MISSING_LEGEND, legends.ACCEPTED_LEGEND, legends.FALLBACK_LEGEND, legends.SOURCE_LEGEND,
+                   legends.filled_by_legend(), legends.deblur_source_legend()):
         colours = [tuple(c) + ((255,) if len(c) == 3 else ()) for _, _, c in legend]
         assert len(set(colours)) == len(colours)
 
@@ -792,18 +796,42 @@ def test_notebook_recipe_streams_the_run_to_the_widgets_source(clip, tmp_path):
             reader.wait(timeout=15)
 
 
-def test_an_error_on_the_recorders_thread_surfaces_and_leaves_no_file(clip, tmp_path, monkeypatch):
+def test_an_error_on_the_recorders_thread_surfaces_in_one_line_and_leaves_no_file(clip, tmp_path, monkeypatch):
     rrd = tmp_path / "broken.rrd"
     recorder = RerunRecorder(rrd, level="summary")
 
-    def broken(stamp, rgb):
-        raise OSError("disk full")
+    def broken(view):
+        raise OSError(errno.EIO, "Input/output error")
 
-    monkeypatch.setattr(recorder, "_on_output", broken)
-    with pytest.raises(RuntimeError, match="disk full"):
-        stabilize(clip, None, StabilizeConfig(mode="none"), observer=recorder)
+    monkeypatch.setattr(recorder, "_write_frame", broken)
+    with pytest.raises(OutputError, match=r"cannot write the recording .*broken.rrd: Input/output error; the video "
+                                          r"was not written either$"):
+        stabilize(clip, tmp_path / "out.mp4", StabilizeConfig(mode="none"), observer=recorder)
     recorder.abort()  # what the CLI does on any error
-    assert not rrd.exists() and not list(tmp_path.glob(".broken.*"))
+    assert not rrd.exists() and not list(tmp_path.glob(".broken.*")) and not (tmp_path / "out.mp4").exists()
+
+
+def test_a_full_disk_under_the_recording_is_one_line_and_leaves_nothing(clip, tmp_path, monkeypatch, capfd):
+    """The recording's file fills its disk (its writes fail with ENOSPC after 100 kB): one line saying so and
+    whether the video was written, exit 3, no temporary file, nothing of rerun's own on stderr."""
+    from ffviz.recording import sink
+
+    real_write = sink.PipedFile._write
+
+    def write(self, target, chunk):
+        if self.bytes_written + len(chunk) > 100_000:
+            self.error = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return
+        real_write(self, target, chunk)
+
+    monkeypatch.setattr(sink.PipedFile, "_write", write)
+    out, rrd = tmp_path / "out.mp4", tmp_path / "full.rrd"
+    assert cli.main(["stabilize", str(clip), "-o", str(out), "--rrd", str(rrd)]) == 3
+    err = capfd.readouterr().err.strip().splitlines()
+    assert err[-1] == (f"ffviz: error: cannot write the recording {rrd}: No space left on device; the video was "
+                       f"{'written' if out.exists() else 'not written either'}")
+    assert not any("ERROR" in line or "re_log" in line for line in err)
+    assert not rrd.exists() and not list(tmp_path.glob(".full.*"))
 
 
 def _dataclasses_in(hint) -> list[type]:
@@ -816,7 +844,7 @@ def _dataclasses_in(hint) -> list[type]:
 def test_every_result_field_is_recorded_or_marked_not_recorded():
     """Walks the result types the recorder receives, field by field, through nested result types: each field has
     a row in the recorder's one table (entities, Nested or NotRecorded), and the table has no stale rows."""
-    from ffviz.recorder import RECORDED_FIELDS, Nested
+    from ffviz.recording.fields import RECORDED_FIELDS, Nested
     from pipeline.results import PathPlan
     from pipeline.stages.motion import MotionEstimate
 
@@ -845,14 +873,14 @@ def test_every_result_field_is_recorded_or_marked_not_recorded():
 def test_every_entity_of_the_field_table_is_in_a_recording(full_run, clip, tmp_path):
     """The table is what the recorder does: every entity it names is in a full recording or in a crop-mode one
     made with the options that add entities (--rolling-shutter, --ignore), every timeline it names is used."""
-    from ffviz.recorder import RECORDED_FIELDS, NotRecorded
+    from ffviz.recording.fields import RECORDED_FIELDS, NotRecorded
 
     crop_rrd = tmp_path / "crop.rrd"  # with the options whose results only they record
     options = StabilizeConfig(mode="crop", rolling_shutter=0.5,
                               motion=MotionConfig(ignore=(IgnoreRegion(10, 10, 60, 40),)))
     stabilize(clip, None, options, observer=RerunRecorder(crop_rrd, level="full"))
     # their charts are shown, and the log (the readout time is logged)
-    assert snapshot.layout_facts(crop_rrd)[1] == {"crop": True, "rolling_shutter": True, "log": True}
+    assert snapshot.layout_facts(crop_rrd)[1] == {"crop": True, "rolling_shutter": True, "log": True, "portrait": False}
     layout = _embedded_layout(crop_rrd)  # the recorder's own layout says the same
     assert "crop scale" in layout and "rolling shutter:" in layout and "warnings and notes" in layout
     entities = set(full_run[0].entities) | set(Recording.load(crop_rrd).entities)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from ffviz import entities as ent
-from ffviz.recorder import ROLLING_SHUTTER_BANDS, ROLLING_SHUTTER_GAIN, RerunRecorder
+from ffviz.recorder import RerunRecorder
+from ffviz.recorder import ROLLING_SHUTTER_BANDS, ROLLING_SHUTTER_GAIN
 from ffviz.rrd import Recording
 from pipeline.evaluation import synthetic
 from pipeline.runtime.observer import Observers, StageCollector

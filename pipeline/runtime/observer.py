@@ -3,10 +3,14 @@
 pipeline/ computes; observers look and must not modify what they are given. An observer receives, in order:
 ``on_start``, ``on_motion`` per frame of pass 1 (single-process runs), ``on_path`` once, ``on_frame`` per
 frame in frame order, ``on_warning`` whenever one is raised, ``on_finish``. The types are pipeline/results.py's.
+``keep`` runs on the rendering threads, as soon as each frame is made and before ``on_frame``: what it returns
+is what the run holds of the frame while the frame waits for its turn, so an observer that needs only a digest
+of the intermediates keeps memory bounded by returning just that.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Protocol
 
 from pipeline.results import FrameResult, PathPlan, Stamp
@@ -24,6 +28,11 @@ class Observer(Protocol):
 
     def on_path(self, plan: PathPlan) -> None:
         """The whole video's path plan, before any frame is rendered."""
+
+    def keep(self, result: FrameResult) -> FrameResult:
+        """What of a frame's result this observer's ``on_frame`` needs: ``result`` itself, or
+        ``result.without_intermediates()`` with a digest of its own in ``digests``. Called on a rendering thread
+        (several frames at once), after ``on_path``; temporal consistency then sets the output and ``temporal``."""
 
     def on_frame(self, result: FrameResult) -> None:
         """One frame through the chain, in frame order."""
@@ -45,6 +54,9 @@ class NullObserver:
 
     def on_path(self, plan: PathPlan) -> None:
         pass
+
+    def keep(self, result: FrameResult) -> FrameResult:
+        return result  # an observer derived from this one sees every intermediate
 
     def on_frame(self, result: FrameResult) -> None:
         pass
@@ -102,6 +114,13 @@ class Observers:
     def on_path(self, plan: PathPlan) -> None:
         for o in self.observers:
             o.on_path(plan)
+
+    def keep(self, result: FrameResult) -> FrameResult:
+        """The intermediates if any observer keeps them, and every observer's digest."""
+        kept = [o.keep(result) for o in self.observers]
+        merged = result if any(k.has_intermediates for k in kept) else result.without_intermediates()
+        digests = {key: digest for k in kept for key, digest in k.digests.items()}
+        return dataclasses.replace(merged, digests=digests)
 
     def on_frame(self, result: FrameResult) -> None:
         for o in self.observers:

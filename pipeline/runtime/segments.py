@@ -68,7 +68,7 @@ def join_motion(parts: Iterable[MotionPass]) -> MotionPass:
 def render_segment(path: Path, config: stab.StabilizeConfig, frames: range, plan: PathPlan) -> list[FrameResult]:
     """Pass 2 over one segment: output frames only (intermediates stay here); the window reads
     ``config.window_frames`` frames beyond each end."""
-    return list(render_frames(FileSource(path), plan, config, keep_intermediates=False, frames=frames))
+    return list(render_frames(FileSource(path), plan, config, keep=None, frames=frames))
 
 
 def run(input_path: Path | str, output_path: Path | str | None, config: stab.StabilizeConfig = stab.StabilizeConfig(),

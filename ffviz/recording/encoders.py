@@ -1,0 +1,150 @@
+"""How a recording stores pictures: frame streams as H.264 samples, class maps as paletted PNG, float maps' values
+as 16-bit PNG, sparse pictures as JPEG. Pure encoding; the recorder decides what goes where."""
+
+from __future__ import annotations
+
+import functools
+import struct
+import zlib
+from fractions import Fraction
+from typing import Sequence
+
+import av
+import cv2
+import numpy as np
+import rerun as rr
+
+from ffviz import entities as ent
+from pipeline.results import Stamp
+
+# H.264 frame streams (rr.VideoStream): no B-frames (rerun takes each sample's time as its PTS), zerolatency so that
+# each frame's packet comes out with it (live view, no reordering, nothing held in the encoder), a keyframe a second
+# for seeking. ultrafast: about half superfast's CPU for a fraction of a dB (docs/benchmarks-recording.md).
+H264_OPTIONS = {"preset": "ultrafast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
+KEYFRAME_INTERVAL = 30
+FRAME_SIZE_FIELD = "frame_size"  # (width, height) of a frame stream whose size is odd (ffviz.rrd crops to it)
+# Masks and maps as PNG: rows unfiltered and zlib's run-length strategy. Their pictures are runs of a few values
+# (most pixels have none): a filter buys ~10 % of the bytes for twice the time (docs/benchmarks-recording.md).
+PNG_OPTIONS = [cv2.IMWRITE_PNG_COMPRESSION, 6, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
+               cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+
+
+class VideoTrack:
+    """One frame stream as H.264 samples on a ``rr.VideoStream`` entity, encoded as frames arrive (PyAV)."""
+
+    def __init__(self, rec: rr.RecordingStream, entity: str, fps: float) -> None:
+        self.rec, self.entity, self.fps = rec, entity, fps
+        self._codec: av.CodecContext | None = None
+        self._times: dict[int, float] = {}
+        self.frames = 0
+        self.bytes = 0
+
+    def _open(self, width: int, height: int) -> None:
+        codec = av.CodecContext.create("libx264", "w")
+        codec.width, codec.height, codec.pix_fmt = width + width % 2, height + height % 2, "yuv420p"
+        rate = Fraction(self.fps).limit_denominator(1001) if self.fps and self.fps > 0 else Fraction(30)
+        codec.framerate, codec.time_base = rate, 1 / rate
+        codec.options = dict(H264_OPTIONS, g=str(KEYFRAME_INTERVAL))
+        self._codec = codec
+        self.rec.log(self.entity, rr.VideoStream(codec=rr.VideoCodec.H264), static=True)
+        if width % 2 or height % 2:  # the frames' true size, for reading back (4:2:0 pads odd sizes by a row/column)
+            self.rec.log(self.entity, rr.AnyValues(**{FRAME_SIZE_FIELD: np.array([width, height], np.int32)}),
+                         static=True)
+
+    def add(self, stamp: Stamp, rgb: np.ndarray) -> None:
+        height, width = rgb.shape[:2]
+        if self._codec is None:
+            self._open(width, height)
+        if width % 2 or height % 2:  # 4:2:0 needs even sizes: repeat the last row / column
+            rgb = np.pad(rgb, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
+        # OpenCV's BT.601 conversion: 4x cheaper than swscale's here, the same colours back (mean error 1.1 levels).
+        frame = av.VideoFrame.from_ndarray(cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2YUV_I420),
+                                           format="yuv420p")
+        frame.pts = stamp.index
+        self._times[stamp.index] = stamp.time_s
+        self._send(self._codec.encode(frame), current=stamp.index)
+
+    def _send(self, packets: Sequence[av.Packet], current: int | None = None) -> None:
+        for packet in packets:
+            index = int(packet.pts)
+            sample = np.frombuffer(bytes(packet), np.uint8)
+            self.bytes += sample.size
+            self.frames += 1
+            if index == current:  # the frame being recorded (always, with zerolatency): batched with its rows
+                self._times.pop(index, None)
+                self.rec.log(self.entity, rr.VideoStream.from_fields(sample=sample, is_keyframe=bool(packet.is_keyframe)))
+                continue
+            # A late packet: columns, so that the recording's current time (the frame being recorded) stays.
+            self.rec.send_columns(self.entity, indexes=[
+                rr.TimeColumn(ent.FRAME_TIMELINE, sequence=[index]),
+                rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=[self._times.pop(index, 0.0)])],
+                columns=rr.VideoStream.columns(sample=[sample], is_keyframe=[bool(packet.is_keyframe)]))
+
+    def close(self) -> None:
+        if self._codec is not None:
+            self._send(self._codec.encode(None))
+            self._codec = None
+
+
+def png(rgb: np.ndarray) -> bytes:
+    """An RGB(A) picture as PNG."""
+    conversion = cv2.COLOR_RGBA2BGRA if rgb.shape[-1] == 4 else cv2.COLOR_RGB2BGR
+    ok, data = cv2.imencode(".png", cv2.cvtColor(rgb, conversion))
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return data.tobytes()
+
+
+def jpeg(rgb: np.ndarray, quality: int) -> bytes:
+    """An RGB picture as JPEG (OpenCV's encoder: 2-3x Pillow's speed, the same quality scale)."""
+    ok, data = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return data.tobytes()
+
+
+def _png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def indexed_png(indices: np.ndarray, palette: np.ndarray) -> bytes:
+    """An 8-bit paletted PNG: ``indices`` (uint8) into ``palette`` ((256, 4) RGBA; alpha in a tRNS chunk).
+
+    OpenCV writes no paletted PNG, but the image data of an 8-bit grey PNG is laid out as a paletted one's:
+    its grey encoding (a twentieth of an RGBA PNG's time, fewer bytes) is relabelled (IHDR colour type 3)
+    and given the palette. The viewer honours the alphas when the image's opacity is below 1 (SEE_THROUGH);
+    ffviz.rrd reads the indices back."""
+    ok, data = cv2.imencode(".png", np.ascontiguousarray(indices, np.uint8), PNG_OPTIONS)
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    data = data.tobytes()
+    header = bytearray(data[16:29])  # IHDR: width, height, bit depth 8, colour type 0 (grey), ...
+    header[9] = 3  # paletted
+    used = int(np.max(indices, initial=0)) + 1  # PLTE and tRNS need no entries past the highest index
+    return (data[:8] + _png_chunk(b"IHDR", bytes(header)) + _png_chunk(b"PLTE", palette[:used, :3].tobytes())
+            + _png_chunk(b"tRNS", palette[:used, 3].tobytes()) + data[33:])
+
+
+@functools.lru_cache(maxsize=32)
+def legend_palette(legend: tuple) -> np.ndarray:
+    """(256, 4) RGBA palette of a legend's (class, name, colour) rows; classes it does not name are transparent."""
+    palette = np.zeros((256, 4), np.uint8)
+    for code, _, colour in legend:
+        palette[code, :len(colour)] = colour
+        if len(colour) == 3:
+            palette[code, 3] = 255
+    return palette
+
+
+def palette_png(classes: np.ndarray, legend: Sequence[tuple]) -> bytes:
+    """A class map as a paletted PNG whose indices are the classes, coloured (with alpha) by the legend, which
+    is also logged as the entity's AnnotationContext (names of the classes). Lossless by construction."""
+    return indexed_png(classes, legend_palette(tuple(legend)))
+
+
+def png16(stored: np.ndarray) -> bytes:
+    """A grey PNG of ``stored`` (8 or 16 bits)."""
+    ok, data = cv2.imencode(".png", stored, PNG_OPTIONS)
+    if not ok:
+        raise RuntimeError("PNG encoding failed")
+    return data.tobytes()

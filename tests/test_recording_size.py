@@ -1,0 +1,160 @@
+"""Recordings of phone-sized footage: pictures at the recorded size (classes exact, maps and flow consistent), memory
+bounded in bytes between the chain and the file, a 4K clip recorded and read back, the layout by aspect."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from ffviz import blueprint, entities as ent
+from ffviz.recorder import RerunRecorder
+from ffviz.recording.backlog import Backlog
+from ffviz.recording.view import RECORD_SIZE, ViewSize, parse_record_size
+from ffviz.rrd import Recording
+from pipeline.evaluation import synthetic
+from pipeline.stabilize import StabilizeConfig, stabilize
+
+
+def _blocks(view: ViewSize, height: int, width: int):
+    """(rows, cols) of the input block under each recorded pixel, as the downscaling partitions the input."""
+    rows = [((i * height) // view.height, max(((i + 1) * height) // view.height, (i * height) // view.height + 1))
+            for i in range(view.height)]
+    cols = [((j * width) // view.width, max(((j + 1) * width) // view.width, (j * width) // view.width + 1))
+            for j in range(view.width)]
+    return rows, cols
+
+
+@pytest.mark.parametrize("shape, long_side, seed", [((360, 640), 200, 0), ((1920, 1080), 960, 1),
+                                                    ((257, 431), 100, 2)])
+def test_class_maps_keep_exact_classes_and_thin_bands(shape, long_side, seed):
+    """Each recorded pixel holds the commonest non-zero class of its input block (0 only where the block is all 0):
+    no class that is not in the block, and a band one input pixel wide stays visible."""
+    rng = np.random.default_rng(seed)
+    height, width = shape
+    classes = np.zeros(shape, np.uint8)
+    blobs = rng.integers(0, 4, (height // 16 + 1, width // 16 + 1)).astype(np.uint8) * 50
+    classes[:] = np.kron(blobs, np.ones((16, 16), np.uint8))[:height, :width]
+    classes[rng.random(shape) < 0.02] = 7  # speckle
+    classes[:, :16] = 0
+    classes[:, 3] = 200  # a one-pixel column band in an empty strip
+    view = ViewSize.of(width, height, long_side)
+    small = view.classes(classes)
+    assert small.shape == (view.height, view.width) and view.scale < 1
+    rows, cols = _blocks(view, height, width)
+    for i in rng.integers(0, view.height, 40):
+        for j in rng.integers(0, view.width, 40):
+            block = classes[rows[i][0]:rows[i][1], cols[j][0]:cols[j][1]].ravel()
+            nonzero = block[block > 0]
+            if not nonzero.size:
+                assert small[i, j] == 0
+            else:
+                counts = np.bincount(nonzero, minlength=256)
+                assert counts[small[i, j]] == counts.max()
+    band_col = max(j for j, (first, _) in enumerate(cols) if first <= 3)
+    assert (small[:, band_col] == 200).all()
+
+
+def test_float_maps_and_flow_are_means_of_the_values_under_each_pixel():
+    view = ViewSize.of(800, 400, 200)  # 4x4 blocks
+    values = np.full((400, 800), np.nan, np.float32)
+    values[:, :400] = np.arange(400, dtype=np.float32)[None, :]  # left half only
+    small = view.values(values)
+    assert np.isnan(small[:, 100:]).all() and np.isfinite(small[:, :100]).all()
+    np.testing.assert_allclose(small[0, :100], np.arange(100) * 4 + 1.5, atol=1e-4)
+    flow = np.dstack([np.full((400, 800), 8.0, np.float32), np.full((400, 800), -4.0, np.float32)])
+    flow[:2, :2] = np.nan  # a block half without flow keeps the mean of the rest
+    np.testing.assert_allclose(view.flow(flow)[0, 0], (2.0, -1.0))  # vectors in recorded pixels: x 0.25
+
+
+def test_record_size_choices():
+    assert parse_record_size("full") is None and parse_record_size("1280") == 1280
+    assert ViewSize.of(1080, 1920, RECORD_SIZE) == ViewSize(540, 960, 0.5)
+    assert ViewSize.of(640, 360, RECORD_SIZE).native
+    for bad in ("0", "abc", "-5", "12"):
+        with pytest.raises(ValueError, match="record-size"):
+            parse_record_size(bad)
+
+
+def test_the_backlog_holds_at_most_its_budget_with_a_slow_writer():
+    """A writer slower than the producer: the producer waits, the bytes held never pass the budget, nothing is
+    lost and the work runs in order."""
+    done: list[int] = []
+    backlog = Backlog(budget_bytes=10 << 20)
+    for k in range(12):
+        backlog.put(3 << 20, lambda k=k: (time.sleep(0.02), done.append(k)))
+        assert backlog.held_bytes <= 10 << 20
+    backlog.close()
+    assert done == list(range(12)) and 9 << 20 <= backlog.peak_bytes <= 10 << 20
+
+
+def test_the_backlog_takes_one_item_larger_than_its_budget_and_raises_the_writers_error():
+    backlog = Backlog(budget_bytes=1)
+    ran = threading.Event()
+    backlog.put(100, ran.set)
+    backlog.put(100, lambda: (_ for _ in ()).throw(OSError("broken")))
+    with pytest.raises(OSError, match="broken"):
+        for _ in range(100):
+            backlog.put(100, lambda: None)
+            time.sleep(0.01)
+    backlog.close(drop=True)
+    assert ran.is_set()
+
+
+def test_a_recording_with_a_slow_writer_holds_at_most_its_budget(tmp_path, monkeypatch):
+    clip = tmp_path / "clip.mp4"
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=24)), clip)
+    recorder = RerunRecorder(tmp_path / "slow.rrd", backlog_bytes=2 << 20)
+    write = recorder._write_frame
+    monkeypatch.setattr(recorder, "_write_frame", lambda view: (time.sleep(0.05), write(view)))
+    stabilize(clip, None, StabilizeConfig(), observer=recorder)
+    backlog = recorder._backlog
+    frame_view = 4 * 320 * 180 * 3  # a frame's digest holds about four frame streams
+    assert frame_view <= backlog.peak_bytes <= (2 << 20) + 2 * frame_view
+    assert len(Recording.load(tmp_path / "slow.rrd").indices(ent.OUTPUT_FRAME)) == 24
+
+
+@pytest.fixture(scope="module")
+def uhd_recording(tmp_path_factory):
+    """A short 3840x2160 clip recorded at the default size."""
+    folder = tmp_path_factory.mktemp("uhd")
+    clip = folder / "uhd.mp4"
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=3840, height=2160, n_frames=8, seed=3)),
+                          clip)
+    rrd = folder / "uhd.rrd"
+    recorder = RerunRecorder(rrd, trace_frames=[4])
+    stabilize(clip, None, StabilizeConfig(), observer=recorder)
+    return Recording.load(rrd), recorder
+
+
+def test_a_4k_recording_holds_its_pictures_at_the_recorded_size(uhd_recording):
+    recording, recorder = uhd_recording
+    assert recording.size(ent.SIZES, "input_size") == (3840, 2160)
+    assert recording.size(ent.SIZES, "recorded_size") == (960, 540) == (recorder.view.width, recorder.view.height)
+    for entity in (ent.INPUT_FRAME, ent.OUTPUT_FRAME, ent.COMPLETION_FRAME):
+        assert recording.image(entity, 3).shape == (540, 960, 3)
+    for entity in (ent.STABILIZED_MISSING, ent.COMPLETION_SOURCE, ent.COMPLETION_FILLED_BY):
+        assert recording.image(entity, 3).shape == (540, 960)
+    assert recording.map(ent.COMPLETION_VARIANCE, 3).shape == (540, 960)
+    assert recording.image(ent.trace_image(4), 4, ent.FRAME_TIMELINE).shape[:2] == (2160, 3840)  # traced: native
+
+
+def test_a_4k_recordings_classes_are_the_pipelines_and_its_statistics_full_resolution(uhd_recording):
+    recording, _ = uhd_recording
+    legend_classes = set(recording.annotation_colours(ent.COMPLETION_SOURCE).values())
+    for t in recording.indices(ent.COMPLETION_SOURCE):
+        classes = recording.image(ent.COMPLETION_SOURCE, t)
+        assert set(np.unique(classes)) <= legend_classes
+    frames, missing = recording.scalars(f"{ent.COMPLETION_STATS}/missing")
+    assert len(frames) == 8 and (missing > 0).any() and (missing < 0.5).all()
+
+
+def test_the_layout_lays_portrait_frames_side_by_side():
+    def frame_rows(bp):
+        overview = bp.root_container.contents[0]
+        return type(overview).__name__
+
+    assert frame_rows(blueprint.default_blueprint((), portrait=True)) == "Horizontal"
+    assert frame_rows(blueprint.default_blueprint((), portrait=False)) == "Vertical"
