@@ -88,7 +88,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="ffviz-recording-cost-") as tmp:
         folder = Path(tmp)
         if args.clip is not None:
-            from pipeline.runtime.video_io import count_frames
+            from pipeline.runtime.video_reader import count_frames
 
             clip = args.clip
             args.frames = count_frames(clip)

@@ -308,7 +308,7 @@ def _finite(value: float) -> float | None:
 
 def input_row(clip: Path) -> BenchRow:
     from pipeline.evaluation import metrics
-    from pipeline.runtime.video_io import probe_video
+    from pipeline.runtime.video_reader import probe_video
 
     info = probe_video(clip)
     own = metrics.video_motion_stats(clip)
@@ -319,7 +319,7 @@ def input_row(clip: Path) -> BenchRow:
 
 def describe_output(output: Path) -> tuple[str, float | None]:
     """(video codec, kbit/s of the whole file over its duration) of a written output."""
-    from pipeline.runtime.video_io import probe_video
+    from pipeline.runtime.video_reader import probe_video
 
     info = probe_video(output)
     kbit_s = output.stat().st_size * 8 / 1000 / info.duration_s if info.duration_s > 0 else None

@@ -20,7 +20,8 @@ from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (t
 from pipeline.stages import adaptive_crop, deblur, motion, smoothing
 from pipeline import presets
 from pipeline import stabilize as stab
-from pipeline.runtime import memory, video_io
+from pipeline.runtime.encoding import Encoding, VIDEO_CODECS, X264_PRESETS
+from pipeline.runtime import memory
 from pipeline.errors import ConfigError, FFVizError
 
 _stabilize_config = stabilize_config  # the name tests/test_deblur.py uses
@@ -308,18 +309,18 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "and 'fmm_step'), or 'none' (default: 3 frames with missing area at --record full, none "
                         "at summary)")
     _deprecated(p, "--trace-frames", "--frames", dest="frames", type=_frame_list)
-    p.add_argument("--codec", choices=video_io.VIDEO_CODECS, default="auto",
+    p.add_argument("--codec", choices=VIDEO_CODECS, default="auto",
                    help="output video: auto (h264 for 8-bit input, hevc for 10/12-bit and HDR input), h264 (x264; "
                         "--crf, --preset), hevc (x265; --crf, --preset) or mpeg4 (MPEG-4 Part 2, what OpenCV's XVID "
                         "writer uses; --qscale; 8-bit only): a tenth of x264's CPU for about twice the bits "
                         "(default: %(default)s)")
     p.add_argument("--crf", type=int, default=None,
-                   help="h264 quality, 0-51 (lower is better; default: %d)" % video_io.Encoding.crf)
-    p.add_argument("--preset", choices=video_io.X264_PRESETS, default=None,
+                   help="h264 quality, 0-51 (lower is better; default: %d)" % Encoding.crf)
+    p.add_argument("--preset", choices=X264_PRESETS, default=None,
                    help="h264 speed against file size at the same --crf quality: faster presets encode sooner into "
-                        "larger files (default: %s)" % video_io.Encoding.preset)
+                        "larger files (default: %s)" % Encoding.preset)
     p.add_argument("--qscale", type=int, default=None,
-                   help="mpeg4 quantiser, 2-31 (lower is better; default: %d)" % video_io.Encoding.qscale)
+                   help="mpeg4 quantiser, 2-31 (lower is better; default: %d)" % Encoding.qscale)
     if rrd_folder:
         return
     p.add_argument("--workers", "-j", type=int, default=None, metavar="N",

@@ -32,7 +32,10 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError, InputError
-from pipeline.runtime import video_io
+from pipeline.frames import Frame
+from pipeline.runtime.encoding import Encoding
+from pipeline.runtime.video_info import VideoInfo
+from pipeline.runtime import video_reader, video_writer
 from pipeline.runtime.observer import ProgressFactory, null_progress
 from pipeline.stages import motion
 
@@ -45,7 +48,7 @@ BACKGROUND = (22, 24, 29)  # around and between the videos
 PLOT_BACKGROUND = (34, 37, 44)
 TEXT = (225, 228, 235)
 GAP_PX = 4  # between two videos
-ENCODING = video_io.Encoding(codec="h264", preset="veryfast")  # a viewing aid: x264, CRF 18, a third of medium's CPU
+ENCODING = Encoding(codec="h264", preset="veryfast")  # a viewing aid: x264, CRF 18, a third of medium's CPU
 
 
 @dataclass(frozen=True)
@@ -62,7 +65,7 @@ class Panel:
 class CameraPath:
     """A video's accumulated camera path, one row per frame (pass 1)."""
 
-    info: video_io.VideoInfo
+    info: VideoInfo
     times: np.ndarray  # (N,) seconds since the video's first frame
     xy_angle: np.ndarray  # (N, 3) frame centre in the first frame (x, y px, the video's own pixels), rotation (deg)
     cuts: int  # pairs the estimator took for scene cuts (the path does not move there)
@@ -94,8 +97,8 @@ class CompareReport:
     warnings: tuple[str, ...]
 
 
-def _reader(panel: Panel) -> video_io.VideoReader:
-    return video_io.VideoReader(panel.path, start_s=panel.start_s, end_s=panel.end_s)
+def _reader(panel: Panel) -> video_reader.VideoReader:
+    return video_reader.VideoReader(panel.path, start_s=panel.start_s, end_s=panel.end_s)
 
 
 def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progress=None,
@@ -271,7 +274,7 @@ def _background(lay: _Layout, labels: Sequence[str], plotted: Sequence[np.ndarra
     return np.ascontiguousarray(rgb), maps
 
 
-def _timed(reader: video_io.VideoReader) -> Iterator[tuple[float, video_io.Frame]]:
+def _timed(reader: video_reader.VideoReader) -> Iterator[tuple[float, Frame]]:
     """(seconds since the video's first frame, frame) of each frame."""
     first = None
     for frame in reader:
@@ -282,26 +285,26 @@ def _timed(reader: video_io.VideoReader) -> Iterator[tuple[float, video_io.Frame
 class _Follower:
     """Another video in pass 2: its latest frame at or before a time (its first one before it starts)."""
 
-    def __init__(self, frames: Iterator[tuple[float, video_io.Frame]]) -> None:
+    def __init__(self, frames: Iterator[tuple[float, Frame]]) -> None:
         self._frames = frames
         self.current = next(frames)
         self._next = next(frames, None)
 
-    def at(self, time_s: float) -> video_io.Frame:
+    def at(self, time_s: float) -> Frame:
         while self._next is not None and self._next[0] <= time_s:
             self.current, self._next = self._next, next(self._frames, None)
         return self.current[1]
 
 
-def _reader_info(panel: Panel) -> video_io.VideoInfo:
-    info = video_io.probe_video(panel.path)
+def _reader_info(panel: Panel) -> VideoInfo:
+    info = video_reader.probe_video(panel.path)
     if panel.start_s is not None or panel.end_s is not None:
-        info = video_io.clipped_info(info, panel.start_s, panel.end_s)
+        info = video_reader.clipped_info(info, panel.start_s, panel.end_s)
     return info
 
 
 def compose(background: np.ndarray, lay: _Layout, axes: Sequence[_Axis], time_s: float,
-            shown: Sequence[video_io.Frame], plotted: Sequence[np.ndarray]) -> np.ndarray:
+            shown: Sequence[Frame], plotted: Sequence[np.ndarray]) -> np.ndarray:
     """One output frame: the videos' frames ``shown`` (scaled to the layout) on the background, and a cursor at
     ``time_s`` on each plot with a dot on each video's path at the frame shown."""
     out = background.copy()
@@ -325,7 +328,7 @@ def compose(background: np.ndarray, lay: _Layout, axes: Sequence[_Axis], time_s:
 
 def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = False, height: int | None = None,
             shortest: bool = False, progress: ProgressFactory = null_progress,
-            encoding: video_io.Encoding = ENCODING) -> CompareReport:
+            encoding: Encoding = ENCODING) -> CompareReport:
     """Write the side-by-side of ``panels`` (the first is the input: its frames, timing and audio lead) to
     ``output``. Raises InputError for a video that cannot be read or is shorter than the input (unless
     ``shortest``), OutputError for an output that is one of the videos or exists (unless ``overwrite``).
@@ -337,8 +340,8 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
         raise ConfigError(f"height must be between 16 and 4320 px, not {height}")
     infos = [_reader_info(panel) for panel in panels]  # every video readable before anything is written
     for panel in panels:  # the output is none of the videos (before saying it exists)
-        video_io.check_output_path(output, panel.path, overwrite=True)
-    video_io.check_output_path(output, panels[0].path, overwrite=overwrite)
+        video_writer.check_output_path(output, panel.path, overwrite=True)
+    video_writer.check_output_path(output, panels[0].path, overwrite=overwrite)
 
     bar = progress("compare 1/2: camera paths", sum(info.frame_count for info in infos) or None)
     stop = threading.Event()
@@ -387,13 +390,13 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
                                colour=dataclasses.replace(lead.info.colour, bit_depth=8))
     audio_from = panels[0].path if lead.info.has_audio else None
     bar = progress("compare 2/2: side by side + encode", len(lead.times))
-    readers: list[video_io.VideoReader] = []
+    readers: list[video_reader.VideoReader] = []
     writer = None
     written = 0
     try:
         readers = [_reader(panel) for panel in panels]
-        writer = video_io.VideoWriter(output, like=like, width=lay.width, height=lay.height, audio_from=audio_from,
-                                      encoding=encoding)
+        writer = video_writer.VideoWriter(output, like=like, width=lay.width, height=lay.height, audio_from=audio_from,
+                                          encoding=encoding)
         followers = [_Follower(_timed(reader)) for reader in readers[1:]]
         for time_s, frame in _timed(readers[0]):
             if time_s >= end_s - leeway:
@@ -500,7 +503,7 @@ def preview_range(args) -> tuple[float | None, float | None]:
 
 def check_compare_path(path: Path, input_path: Path, output_path: Path, *, overwrite: bool) -> None:
     """--compare FILE: refused like any output, and it must not be the stabilized output either."""
-    video_io.check_output_path(path, input_path, overwrite=overwrite)
+    video_writer.check_output_path(path, input_path, overwrite=overwrite)
     if Path(path).absolute() == Path(output_path).absolute():
         raise ConfigError(f"--compare {path} is the stabilized output itself: name another file")
 

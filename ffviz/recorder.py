@@ -40,7 +40,7 @@ from pipeline.stages.motion import MotionEstimate
 from pipeline.stages.rolling_shutter import Correction
 from pipeline.results import FrameResult, PathComparison, PathPlan, Stamp
 from pipeline.runtime.colour import ColourDescription, display_rgb
-from pipeline.runtime.video_io import Frame
+from pipeline.frames import Frame
 from pipeline.stages.deblur import DeblurResult
 from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages.smoothing import SmoothingResult

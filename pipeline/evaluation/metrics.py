@@ -17,7 +17,7 @@ of ours: residual jitter in pixels (one video) and the flicker of synthesized pi
 * Synthesized-pixel flicker (``synthesized_change``): mean |O_t - warp(O_{t-1})| over output pixels outside
   the input frame's mapped outline (a seam band excluded), divided by the same mean over real pixels.
 
-Invariants: both videos are read only through ``video_io.VideoReader`` (upright, rotation tags applied; an
+Invariants: both videos are read only through ``video_reader.VideoReader`` (upright, rotation tags applied; an
 undecodable frame stood in for by the previous one, so frame counts agree with the stabilizer's); a failed
 pair is left out of every mean, never counted as a value (NaN when all fail; ``to_dict`` writes None).
 Every definition in full, with where and why it departs from the script: docs/metrics.md.
@@ -35,7 +35,8 @@ import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from pipeline.runtime import video_io
+from pipeline.runtime.video_info import VideoInfo
+from pipeline.runtime import video_reader
 from pipeline.errors import ConfigError, InputError
 
 _MIN_INLIERS = 8
@@ -112,20 +113,20 @@ class StabilizationMetrics:
 
 
 # ----------------------------------------------------------------------------------------------
-# Reading: only through pipeline.runtime.video_io, so both videos are seen upright (the container's rotation
+# Reading: only through pipeline.runtime.video_reader, so both videos are seen upright (the container's rotation
 # tag applied) exactly as the stabilizer saw its input and wrote its output, and a frame that does not
 # decode is stood in for as in the stabilizer (frame count and timing kept). Read raw, a phone clip
 # tagged "rotate 90" is landscape while its upright output is portrait: the output was squeezed onto
 # the input's size and the distortion read about 0.56 instead of 0.99.
 
 
-def _fps(info: video_io.VideoInfo) -> float:
+def _fps(info: VideoInfo) -> float:
     """Frame rate for the jitter low-pass (sigma = fps / 2 frames)."""
     fps = float(info.fps)
     return fps if math.isfinite(fps) and fps > 0 else 30.0
 
 
-def _pictures(reader: video_io.VideoReader) -> Iterator[np.ndarray]:
+def _pictures(reader: video_reader.VideoReader) -> Iterator[np.ndarray]:
     """The reader's upright RGB frames, (H, W, 3) uint8, one at a time."""
     for frame in reader:
         yield frame.rgb
@@ -467,7 +468,7 @@ def video_motion_stats(path, config: MetricsConfig = MetricsConfig()) -> VideoMo
     pair_futures = []
     n = 0
     width = height = 0
-    with video_io.VideoReader(path) as reader, ThreadPoolExecutor(max_workers=2) as pool:
+    with video_reader.VideoReader(path) as reader, ThreadPoolExecutor(max_workers=2) as pool:
         fps = _fps(reader.info)
         pending = None  # detection of the previous frame
         last: _Features | None = None  # features of the frame before it
@@ -505,17 +506,17 @@ def compare(
     matches of frame t run while frame t+1 is decoded and detected; of the previous frame only its
     features and, for the flicker figure, its grey output frame and its labels are kept.
     ``progress(done, total)`` is called once per frame; total is the input's frame count from its
-    container (video_io.VideoInfo.frame_count: an estimate for MKV). Both videos are read upright
-    through video_io (see Reading). Raises InputError when a video cannot be read or the frame
+    container (VideoInfo.frame_count: an estimate for MKV). Both videos are read upright
+    through video_reader (see Reading). Raises InputError when a video cannot be read or the frame
     counts differ.
     """
     with ExitStack() as stack:
-        in_reader = stack.enter_context(video_io.VideoReader(input_path))
-        out_reader = stack.enter_context(video_io.VideoReader(output_path))
+        in_reader = stack.enter_context(video_reader.VideoReader(input_path))
+        out_reader = stack.enter_context(video_reader.VideoReader(output_path))
         return _compare(in_reader, out_reader, config, progress)
 
 
-def _compare(in_reader: video_io.VideoReader, out_reader: video_io.VideoReader, config: MetricsConfig,
+def _compare(in_reader: video_reader.VideoReader, out_reader: video_reader.VideoReader, config: MetricsConfig,
              progress: Callable[[int, int], None] | None) -> StabilizationMetrics:
     fps_in, fps_out = _fps(in_reader.info), _fps(out_reader.info)
     total = in_reader.info.frame_count  # the container's count (an estimate for MKV): for progress only

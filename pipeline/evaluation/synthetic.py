@@ -773,7 +773,7 @@ def write_video(
     ``crf`` (0 = lossless in YUV), x264's ``preset`` (None: its default), the config fps."""
     import av
 
-    from pipeline.runtime.video_io import x264_options
+    from pipeline.runtime.encoding import x264_options
 
     if isinstance(video, SyntheticVideo):
         frames: Iterable[np.ndarray] = video.sharp_frames if sharp else video.frames
