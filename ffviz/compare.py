@@ -343,18 +343,40 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
         video_writer.check_output_path(output, panel.path, overwrite=True)
     video_writer.check_output_path(output, panels[0].path, overwrite=overwrite)
 
+    paths = _camera_paths(panels, infos, progress)
+    lead = paths[0]
+    end_s = _common_end(panels, paths, shortest)
+    sizes = [(p.info.width, p.info.height) for p in paths]
+    lay = layout(sizes, height or lead.info.height)
+    scales = [lay.video_height / h for _, h in sizes]  # each video's px to the comparison's
+    plotted = [p.xy_angle * np.array([s, s, 1.0]) for p, s in zip(paths, scales)]
+    shown = [p.times < end_s - 0.5 / float(p.info.fps) for p in paths]  # the part of each that is shown
+    background, axes = _background(lay, [panel.label for panel in panels], [xy[s] for xy, s in zip(plotted, shown)],
+                                   [p.times[s] for p, s in zip(paths, shown)], end_s)
+    summaries = _summaries(panels, paths, plotted, shown)
+    written, warnings = _write_side_by_side(panels, output, lead, end_s, _Picture(background, lay, axes, plotted),
+                                            progress, encoding)
+    return CompareReport(output, written, lay.width, lay.height, tuple(summaries), tuple(warnings))
+
+
+def _camera_paths(panels: Sequence[Panel], infos: Sequence[VideoInfo], progress: ProgressFactory) -> list[CameraPath]:
+    """Pass 1: every video's camera path, two videos at a time."""
     bar = progress("compare 1/2: camera paths", sum(info.frame_count for info in infos) or None)
     stop = threading.Event()
     try:
         with ThreadPoolExecutor(max_workers=min(len(panels), 2)) as pool:
             try:
-                paths = list(pool.map(lambda panel: camera_path(panel, progress=bar, stop=stop), panels))
+                return list(pool.map(lambda panel: camera_path(panel, progress=bar, stop=stop), panels))
             except BaseException:  # Ctrl-C, SIGTERM or a video's error: the other threads stop at their next frame
                 stop.set()
                 raise
     finally:
         bar.close()
 
+
+def _common_end(panels: Sequence[Panel], paths: Sequence[CameraPath], shortest: bool) -> float:
+    """Where the comparison ends (seconds): the input's end, or with ``shortest`` the shortest video's; a video
+    that ends before the input without ``shortest`` is an InputError."""
     lead = paths[0]
     fps = float(lead.info.fps)
     end_s = lead.end_s
@@ -366,29 +388,45 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
                     f"({lead.end_s:.2f} s, {len(lead.times)} frames): pass --shortest to end the comparison with the "
                     f"shortest video")
             end_s = min(end_s, path.end_s)
+    return end_s
 
-    sizes = [(p.info.width, p.info.height) for p in paths]
-    lay = layout(sizes, height or lead.info.height)
-    scales = [lay.video_height / h for _, h in sizes]  # each video's px to the comparison's
-    plotted = [p.xy_angle * np.array([s, s, 1.0]) for p, s in zip(paths, scales)]
-    shown = [p.times < end_s - 0.5 / float(p.info.fps) for p in paths]  # the part of each that is shown
-    background, axes = _background(lay, [panel.label for panel in panels], [xy[s] for xy, s in zip(plotted, shown)],
-                                   [p.times[s] for p, s in zip(paths, shown)], end_s)
+
+def _summaries(panels: Sequence[Panel], paths: Sequence[CameraPath], plotted: Sequence[np.ndarray],
+               shown: Sequence[np.ndarray]) -> list[PanelSummary]:
+    """Each video's line of the report: frames shown, size, and the residual jitter of its path over them."""
     from pipeline.evaluation import metrics  # here: it imports scipy.ndimage, which `ffviz --help` need not
 
     summaries = []
-    for panel, path, xy_angle, shown in zip(panels, paths, plotted, shown):
-        jitter_px, jitter_deg = metrics.residual_jitter(xy_angle[shown] * np.array([1.0, 1.0, math.pi / 180.0]),
+    for panel, path, xy_angle, part in zip(panels, paths, plotted, shown):
+        jitter_px, jitter_deg = metrics.residual_jitter(xy_angle[part] * np.array([1.0, 1.0, math.pi / 180.0]),
                                                         float(path.info.fps))
-        summaries.append(PanelSummary(panel.label, panel.path, int(shown.sum()), path.info.width,
+        summaries.append(PanelSummary(panel.label, panel.path, int(part.sum()), path.info.width,
                                       path.info.height, jitter_px, jitter_deg))
+    return summaries
 
+
+@dataclass(frozen=True)
+class _Picture:
+    """What every output frame shares: the background with labels and plots, its layout, the plots' axes, and each
+    video's path in the comparison's pixels."""
+    background: np.ndarray
+    lay: _Layout
+    axes: list[_Axis]
+    plotted: list[np.ndarray]
+
+
+def _write_side_by_side(panels: Sequence[Panel], output: Path, lead: CameraPath, end_s: float, picture: _Picture,
+                        progress: ProgressFactory, encoding: Encoding) -> tuple[int, list[str]]:
+    """Pass 2: the input's frames up to ``end_s``, each beside the other videos' frames of its time, written to
+    ``output`` with the input's timing and audio. (Frames written, the readers' and the writer's warnings.)"""
+    fps = float(lead.info.fps)
     leeway = 0.5 / fps
     # A clip: the output starts at the input's first frame, and the audio ends with the last frame written.
     # 8 bits (the frames are read as uint8; 8-bit H.264 plays everywhere), the input's matrix, range and tags.
     like = dataclasses.replace(lead.info, clip=lead.info.clip or (0.0, end_s),
                                colour=dataclasses.replace(lead.info.colour, bit_depth=8))
     audio_from = panels[0].path if lead.info.has_audio else None
+    lay = picture.lay
     bar = progress("compare 2/2: side by side + encode", len(lead.times))
     readers: list[video_reader.VideoReader] = []
     writer = None
@@ -402,7 +440,8 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
             if time_s >= end_s - leeway:
                 break
             shown = [frame] + [follower.at(time_s + leeway) for follower in followers]
-            writer.write(compose(background, lay, axes, time_s, shown, plotted), pts=frame.pts, time_s=frame.time_s)
+            writer.write(compose(picture.background, lay, picture.axes, time_s, shown, picture.plotted),
+                         pts=frame.pts, time_s=frame.time_s)
             written += 1
             bar.update()
         writer.close()
@@ -414,8 +453,7 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
         for reader in readers:
             reader.close()
         bar.close()
-    warnings = [*writer.warnings, *(w for reader in readers for w in reader.warnings)]
-    return CompareReport(output, written, lay.width, lay.height, tuple(summaries), tuple(warnings))
+    return written, [*writer.warnings, *(w for reader in readers for w in reader.warnings)]
 
 
 # -- the command line: `ffviz compare`, and `ffviz stabilize --compare / --preview / --start` ------------------
