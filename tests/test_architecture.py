@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import fnmatch
 import re
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -257,3 +258,48 @@ def test_long_module_docstrings_are_found(tmp_path):
 def test_module_docstrings_in_pipeline_stay_short():
     too_long = long_module_docstrings(REPO / "pipeline")
     assert not too_long, f"module docstrings over {MAX_MODULE_DOCSTRING_LINES} lines (move measurements to docs/): {too_long}"
+
+
+MAX_FUNCTION_LINES = 80  # a function fits on a screen (argument tables may be data instead)
+# Functions still over the limit, each to be split; an entry that no longer is over it fails the test below, so
+# the list only shrinks.
+LONG_FUNCTIONS_TO_SPLIT = {"pipeline/stages/completion.py: complete",
+                           "pipeline/stages/completion.py: register_neighbours"}
+
+
+def long_functions(root: Path, limit: int = MAX_FUNCTION_LINES) -> dict[str, int]:
+    """Lines (signature to last line) by "file: function" (file relative to root's parent, a method as
+    Class.name) of every function under ``root`` longer than ``limit``; a nested one is counted on its own too."""
+    found = {}
+
+    def visit(node: ast.AST, path: Path, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = child.end_lineno - child.lineno + 1
+                if lines > limit:
+                    found[f"{path.relative_to(root.parent)}: {prefix}{child.name}"] = lines
+                visit(child, path, f"{prefix}{child.name}.")
+            else:
+                visit(child, path, f"{prefix}{child.name}." if isinstance(child, ast.ClassDef) else prefix)
+
+    for path in sorted(root.rglob("*.py")):
+        visit(ast.parse(path.read_text(), filename=str(path)), path, "")
+    return found
+
+
+def test_long_functions_are_found(tmp_path):
+    package = tmp_path / "pkg"
+    package.mkdir()
+    body = "\n".join(["x = 1"] * 79)
+    fits = "def fits():\n" + textwrap.indent(body, "    ")  # 80 lines
+    long = "class C:\n    def long(self):\n" + textwrap.indent(body + "\ny = 2", "        ")  # 81 lines
+    (package / "a.py").write_text(f"{fits}\n\n\n{long}\n")
+    assert long_functions(package) == {"pkg/a.py: C.long": 81}
+
+
+def test_functions_fit_on_a_screen():
+    found = {**long_functions(REPO / "pipeline"), **long_functions(REPO / "ffviz")}
+    too_long = {name: lines for name, lines in found.items() if name not in LONG_FUNCTIONS_TO_SPLIT}
+    assert not too_long, f"functions over {MAX_FUNCTION_LINES} lines: {too_long}"
+    split = sorted(LONG_FUNCTIONS_TO_SPLIT - set(found))
+    assert not split, f"no longer over {MAX_FUNCTION_LINES} lines: remove them from LONG_FUNCTIONS_TO_SPLIT: {split}"
