@@ -1,7 +1,7 @@
 """Stabilize a video: pass 1 estimates the motion of every frame pair (chapter 3), the path is planned as a whole
 (pipeline/chain.py), pass 2 renders every frame through the per-frame chain and writes it. ``run_passes`` is
-the one orchestration; ``stabilize_source`` runs both passes in this process (threads), pipeline/runtime/
-segments.py runs them segment by segment through a mapper (serial or Ray). Memory is bounded by the frame
+the one orchestration; ``stabilize_source`` runs both passes in this process (threads), pipeline/segments.py
+runs them segment by segment through a mapper (serial or Ray). Memory is bounded by the frame
 window, not by the video's length: pass 1 keeps the previous downscaled frame and one 3x3 matrix per frame.
 """
 
