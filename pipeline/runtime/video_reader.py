@@ -53,6 +53,8 @@ def _looks_like_mp4(path: Path) -> bool:
 
 
 def open_input(path: Path) -> av.container.InputContainer:
+    """``path`` opened for reading (the video and, for the writer, its audio); InputError, naming the file, where
+    FFmpeg cannot open it or it is text rather than video."""
     try:
         # Tags are not always UTF-8 (or are damaged): replace what does not decode rather than fail.
         container = av.open(str(path), "r", metadata_errors="replace")
