@@ -17,7 +17,7 @@ import numpy as np
 from pipeline.evaluation import metrics
 from pipeline.stages import motion, smoothing, warping
 from pipeline import stabilize
-from pipeline.runtime import video_io
+from pipeline.runtime import video_reader
 from pipeline.runtime.observer import NullObserver, null_progress
 from pipeline.runtime.source import FileSource
 
@@ -40,7 +40,7 @@ def main(argv: list[str]) -> int:
     print(f"{'clip':34s} " + " ".join(f"k={k:<2d} jit/crop" for k in radii))
     table = []
     for clip in clips:
-        info = video_io.probe_video(clip)
+        info = video_reader.probe_video(clip)
         passed = stabilize.estimate_motion(FileSource(clip), motion.MotionConfig(), observer=NullObserver(),
                                            progress=null_progress, total=None)
         row = []

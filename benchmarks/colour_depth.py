@@ -28,7 +28,7 @@ import av
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.runtime import video_io  # noqa: E402
+from pipeline.runtime import video_reader  # noqa: E402
 
 BUDGET = 1.5
 
@@ -53,7 +53,7 @@ def cpu_seconds(clip: Path, output: Path, extra: list[str]) -> float:
 
 
 def describe(path: Path) -> str:
-    info = video_io.probe_video(path)
+    info = video_reader.probe_video(path)
     with av.open(str(path)) as container:
         codec = container.streams.video[0].codec_context
         return f"{codec.name} {info.colour.summary()}"

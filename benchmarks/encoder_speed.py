@@ -26,7 +26,7 @@ from pathlib import Path
 
 import av
 
-from pipeline.runtime import video_io
+from pipeline.runtime import video_reader
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import speed_report  # noqa: E402  (benchmarks/ is not a package)
@@ -94,8 +94,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{args.clip} not found: nothing measured")
         return 0
     started = speed_report.machine_line()
-    frames = [frame.rgb for frame in video_io.VideoReader(args.clip)]
-    fps = round(video_io.probe_video(args.clip).fps)
+    frames = [frame.rgb for frame in video_reader.VideoReader(args.clip)]
+    fps = round(video_reader.probe_video(args.clip).fps)
     encoder: dict[str, list[tuple[float, float]]] = {"PyAV default (slice threads)": [], "frame threads (AUTO)": []}
     commands_runs: dict[str, list[tuple[float, float]]] = {}
     with tempfile.TemporaryDirectory() as tmp:

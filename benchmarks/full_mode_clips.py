@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.stages import completion
-from pipeline.runtime import video_io
+from pipeline.runtime import video_reader
 from pipeline.runtime.observer import NullObserver
 from pipeline.stabilize import StabilizeConfig, stabilize
 
@@ -85,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
             started = time.perf_counter()
             report = stabilize(clip, out, StabilizeConfig(mode="full"), observer=audit, overwrite=True)
             seconds = time.perf_counter() - started
-            src, dst = video_io.probe_video(clip), video_io.probe_video(out)
-            n_in, n_out = video_io.count_frames(clip), video_io.count_frames(out)
+            src, dst = video_reader.probe_video(clip), video_reader.probe_video(out)
+            n_in, n_out = video_reader.count_frames(clip), video_reader.count_frames(out)
             filled = audit.sources / max(audit.sources.sum(), 1)
             print(f"{clip.name[:34]:34} {n_in:>5}->{n_out:<5} {dst.width:>4}x{dst.height:<5} "
                   f"{float(src.fps):>6.2f}->{float(dst.fps):<6.2f} {len(report.cuts):>4} "

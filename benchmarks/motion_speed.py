@@ -22,7 +22,8 @@ from pathlib import Path
 import sys
 
 from pipeline.evaluation import metrics
-from pipeline.runtime import video_io
+from pipeline.runtime.encoding import Encoding
+from pipeline.runtime import video_reader
 from pipeline.stabilize import StabilizeConfig, stabilize
 from pipeline.stages import motion
 
@@ -59,7 +60,7 @@ def motion_cpu_ms(frames: list, config: motion.MotionConfig, repeat: int) -> flo
 def output_jitter(clip: Path, config: motion.MotionConfig, workdir: Path, qscale: int = 2) -> float:
     output = workdir / f"{clip.stem}.mp4"
     stabilize(clip, output, StabilizeConfig(mode="none", motion=config), overwrite=True,
-              encoding=video_io.Encoding(codec="mpeg4", qscale=qscale))
+              encoding=Encoding(codec="mpeg4", qscale=qscale))
     return metrics.video_motion_stats(output).residual_jitter_px
 
 
@@ -83,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     noise: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for clip in clips:
-            frames = [frame.rgb for frame in video_io.VideoReader(clip)]
+            frames = [frame.rgb for frame in video_reader.VideoReader(clip)]
             q2 = output_jitter(clip, motion.MotionConfig(), Path(tmp))
             q4 = output_jitter(clip, motion.MotionConfig(), Path(tmp), qscale=4)
             noise[clip.name] = max(abs(q2 - q4), 0.01 * q2)

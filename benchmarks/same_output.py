@@ -33,7 +33,7 @@ def _stabilize(tree: Path, clip: Path, out: Path, mode: str) -> None:
 
 
 def _frames(path: Path) -> list[np.ndarray]:
-    from pipeline.runtime.video_io import VideoReader
+    from pipeline.runtime.video_reader import VideoReader
 
     with VideoReader(path) as reader:
         return [frame.rgb for frame in reader]

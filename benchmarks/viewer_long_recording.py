@@ -25,7 +25,7 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from ffviz.recorder import RerunRecorder  # noqa: E402
 from pipeline.stabilize import StabilizeConfig, stabilize  # noqa: E402
-from pipeline.runtime.video_io import VideoReader  # noqa: E402
+from pipeline.runtime.video_reader import VideoReader  # noqa: E402
 from test_browser import MATCH_SCORE, WINDOW, match_score, press, screenshot, web_viewer_page  # noqa: E402
 
 CLIP = ROOT.parent / "shared" / "videos" / "vplab_C.avi"

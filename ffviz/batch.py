@@ -19,7 +19,9 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
 from ffviz.recording.view import RECORD_SIZE
-from pipeline.runtime import memory, segments, video_io
+from pipeline.runtime.encoding import Encoding
+from pipeline.runtime import memory
+from pipeline import segments
 from pipeline import stabilize as stab
 from pipeline.errors import ConfigError, FFVizError, InputError
 from pipeline.results import FrameResult
@@ -34,7 +36,7 @@ class VideoJob:
     input: Path
     output: Path
     config: stab.StabilizeConfig
-    encoding: video_io.Encoding = video_io.Encoding()
+    encoding: Encoding = Encoding()
     rrd: Path | None = None
     record_level: str = "summary"
     jpeg_quality: int | None = 80
@@ -298,7 +300,7 @@ def add_parser(commands: Any, add_stabilize_options: Callable[..., None]) -> Non
     add_stabilize_options(p, rrd_folder=True)
 
 
-def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: video_io.Encoding) -> list[VideoJob]:
+def _job_list(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: Encoding) -> list[VideoJob]:
     outdir = args.output_dir
     if outdir is None:
         raise ConfigError("batch: --output-dir OUTDIR is required (the folder for the outputs)")
@@ -332,7 +334,7 @@ def summary_table(results: Sequence[VideoResult]) -> str:
     return "\n".join(line.rstrip() for line in lines)
 
 
-def cmd_batch(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: video_io.Encoding) -> int:
+def cmd_batch(args: argparse.Namespace, config: stab.StabilizeConfig, encoding: Encoding) -> int:
     from tqdm import tqdm
 
     if args.jobs is not None and args.jobs < 1:

@@ -308,7 +308,7 @@ def _finite(value: float) -> float | None:
 
 def input_row(clip: Path) -> BenchRow:
     from pipeline.evaluation import metrics
-    from pipeline.runtime.video_io import probe_video
+    from pipeline.runtime.video_reader import probe_video
 
     info = probe_video(clip)
     own = metrics.video_motion_stats(clip)
@@ -319,7 +319,7 @@ def input_row(clip: Path) -> BenchRow:
 
 def describe_output(output: Path) -> tuple[str, float | None]:
     """(video codec, kbit/s of the whole file over its duration) of a written output."""
-    from pipeline.runtime.video_io import probe_video
+    from pipeline.runtime.video_reader import probe_video
 
     info = probe_video(output)
     kbit_s = output.stat().st_size * 8 / 1000 / info.duration_s if info.duration_s > 0 else None
@@ -449,10 +449,30 @@ def cmd_bench(args: argparse.Namespace) -> int:
         print(f"ffviz bench: {note}", file=sys.stderr)
     load_before = os.getloadavg()
     print(report.HEADER, flush=True)
+    inputs, rows = _run_schedule(clips, methods, work, args.repeat)
+
+    table = [r for c in range(len(clips)) if inputs.get(c) is not None
+             for r in [inputs[c]] + [rows[(c, m.name)] for m in methods if (c, m.name) in rows]]
+    run_info = report.RunInfo(repeat=args.repeat, cpus=os.cpu_count() or 0, load_before=load_before,
+                              load_after=os.getloadavg(), notes=notes)
+    paths = report.write_all(table, out, run_info)
+    written = report.write_report(table, report_path, run_info, clips=clips)
+    print()
+    print("\n".join(report.targets(table)))
+    print(f"\nwrote the report {written[0]} (plot {written[1]}) and the raw results "
+          + ", ".join(str(p) for p in paths), flush=True)
+    return 0
+
+
+def _run_schedule(clips: Sequence[Path], methods: Sequence[Method], work: Path, repeats: int,
+                  ) -> tuple[dict[int, BenchRow | None], dict[tuple[int, str], BenchRow]]:
+    """Every method on every clip ``repeats`` times in ``schedule``'s order: (each clip's input row, None for a
+    clip that cannot be read; each (clip, method)'s row). Each row is printed when it is complete."""
+    from ffviz import bench_report as report
 
     inputs: dict[int, BenchRow | None] = {}
     rows: dict[tuple[int, str], BenchRow] = {}
-    for repeat, c, order in schedule(args.repeat, len(clips), len(methods)):
+    for repeat, c, order in schedule(repeats, len(clips), len(methods)):
         clip = clips[c]
         if c not in inputs:
             try:
@@ -471,41 +491,38 @@ def cmd_bench(args: argparse.Namespace) -> int:
                                                              source.frames))
             if row.error and not row.seconds_runs:
                 continue  # it failed to run: do not retry every repeat
-            output = method.output_path(clip, work)
-            try:
-                run = run_method(method, clip, output, work)
-            except MethodFailed as error:
-                row.error = str(error)
-                print(f"ffviz bench: {clip.name}: {method.name} failed: {error}", file=sys.stderr, flush=True)
-                if not row.seconds_runs or repeat == args.repeat - 1:
-                    print(report.markdown_line(row), flush=True)
-                continue
-            row.seconds_runs.append(run.seconds)
-            row.cpu_seconds_runs.append(run.cpu_seconds)
-            if run.steal is not None:
-                row.steal_runs.append(run.steal)
-            row.peak_rss_bytes = max(row.peak_rss_bytes or 0, run.peak_rss_bytes)
-            if row.quality is None and not row.error:
-                try:
-                    row.codec, row.kbit_s = describe_output(output)
-                    row.quality = measure_quality(clip, output)
-                except FFVizError as error:  # timing stands; the output cannot be compared
-                    row.error = f"quality not measured: {error}"
-                    print(f"ffviz bench: {clip.name}: {method.name}: {row.error}", file=sys.stderr, flush=True)
-            if repeat == args.repeat - 1:
-                print(report.markdown_line(row), flush=True)
-            else:
-                print(f"ffviz bench: repeat {repeat + 1}/{args.repeat}: {clip.name}: {method.name} "
-                      f"{run.seconds:.2f} s", file=sys.stderr, flush=True)
+            _run_into(row, method, clip, work, repeat, repeats)
+    return inputs, rows
 
-    table = [r for c in range(len(clips)) if inputs.get(c) is not None
-             for r in [inputs[c]] + [rows[(c, m.name)] for m in methods if (c, m.name) in rows]]
-    run_info = report.RunInfo(repeat=args.repeat, cpus=os.cpu_count() or 0, load_before=load_before,
-                              load_after=os.getloadavg(), notes=notes)
-    paths = report.write_all(table, out, run_info)
-    written = report.write_report(table, report_path, run_info, clips=clips)
-    print()
-    print("\n".join(report.targets(table)))
-    print(f"\nwrote the report {written[0]} (plot {written[1]}) and the raw results "
-          + ", ".join(str(p) for p in paths), flush=True)
-    return 0
+
+def _run_into(row: BenchRow, method: Method, clip: Path, work: Path, repeat: int, repeats: int) -> None:
+    """Run ``method`` on ``clip`` once (repeat ``repeat`` of ``repeats``) and add its timing to ``row``, with its
+    output's codec, bit rate and quality the first time; a failure goes into ``row.error``."""
+    from ffviz import bench_report as report
+
+    output = method.output_path(clip, work)
+    try:
+        run = run_method(method, clip, output, work)
+    except MethodFailed as error:
+        row.error = str(error)
+        print(f"ffviz bench: {clip.name}: {method.name} failed: {error}", file=sys.stderr, flush=True)
+        if not row.seconds_runs or repeat == repeats - 1:
+            print(report.markdown_line(row), flush=True)
+        return
+    row.seconds_runs.append(run.seconds)
+    row.cpu_seconds_runs.append(run.cpu_seconds)
+    if run.steal is not None:
+        row.steal_runs.append(run.steal)
+    row.peak_rss_bytes = max(row.peak_rss_bytes or 0, run.peak_rss_bytes)
+    if row.quality is None and not row.error:
+        try:
+            row.codec, row.kbit_s = describe_output(output)
+            row.quality = measure_quality(clip, output)
+        except FFVizError as error:  # timing stands; the output cannot be compared
+            row.error = f"quality not measured: {error}"
+            print(f"ffviz bench: {clip.name}: {method.name}: {row.error}", file=sys.stderr, flush=True)
+    if repeat == repeats - 1:
+        print(report.markdown_line(row), flush=True)
+    else:
+        print(f"ffviz bench: repeat {repeat + 1}/{repeats}: {clip.name}: {method.name} "
+              f"{run.seconds:.2f} s", file=sys.stderr, flush=True)

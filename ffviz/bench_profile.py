@@ -30,17 +30,18 @@ STAGES = ("decode", "motion", "smoothing", "warp", "mosaic", "flow", "FMM", "loc
 def _functions() -> dict[str, tuple]:
     """stage -> the functions whose cumulative CPU on the main thread is that stage's (none calls another)."""
     from pipeline import chain
-    from pipeline.runtime import video_io
+    from pipeline.runtime.encoding import Encoding
+    from pipeline.runtime import video_reader, video_writer
     from pipeline.stages import completion, fmm, local_flow, mosaic, motion
 
-    return {"decode": (video_io.VideoReader.__iter__,),
+    return {"decode": (video_reader.VideoReader.__iter__,),
             "motion": (motion.prepare, motion.estimate, motion.choose_background),
             "smoothing": (chain.plan_path,),
             "mosaic": tuple(f for f in (mosaic.mosaic_from_samples, getattr(completion, "register_neighbours", None))
                             if f is not None),  # with the neighbours' local registration where there is one
             "flow": (local_flow.local_flow,),
             "FMM": (fmm.inpaint_motion,),
-            "encode": (video_io.VideoWriter.write, video_io.VideoWriter.close)}
+            "encode": (video_writer.VideoWriter.write, video_writer.VideoWriter.close)}
 
 
 @dataclass
@@ -83,7 +84,8 @@ def _cumulative(stats: pstats.Stats, functions: tuple) -> float:
 
 def _run(clip: Path, mode: str, workdir: Path, record: bool, codec: str):
     from pipeline.config import StabilizeConfig
-    from pipeline.runtime import video_io
+    from pipeline.runtime.encoding import Encoding
+    from pipeline.runtime import video_reader, video_writer
     from pipeline.runtime.observer import Observers
     from pipeline.stabilize import stabilize
 
@@ -99,7 +101,7 @@ def _run(clip: Path, mode: str, workdir: Path, record: bool, codec: str):
     cpu_before, thread_before = _process_cpu(), time.thread_time()
     try:
         profile.runcall(stabilize, clip, workdir / f"{mode}.mp4", StabilizeConfig(mode=mode),
-                        observer=Observers(*observers, times), overwrite=True, encoding=video_io.Encoding(codec=codec),
+                        observer=Observers(*observers, times), overwrite=True, encoding=Encoding(codec=codec),
                         workers=1)
     finally:
         cv2.setNumThreads(threads_before)

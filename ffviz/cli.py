@@ -21,7 +21,8 @@ from ffviz.runner import view_command  # noqa: F401 - part of cli's interface (t
 from pipeline.stages import adaptive_crop, deblur, motion, smoothing
 from pipeline import presets
 from pipeline import stabilize as stab
-from pipeline.runtime import memory, video_io
+from pipeline.runtime.encoding import Encoding, VIDEO_CODECS, X264_PRESETS
+from pipeline.runtime import memory
 from pipeline.errors import ConfigError, FFVizError
 
 _stabilize_config = stabilize_config  # the name tests/test_deblur.py uses
@@ -84,7 +85,23 @@ def build_parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add_command in (_add_stabilize_command, _add_demo_command, _add_metrics_command, _add_view_command,
+                        _add_snapshot_command, _add_figures_command):
+        add_command(commands)
+    from ffviz.batch import add_parser as add_batch_parser  # imports no Ray: that happens when a batch runs
 
+    add_batch_parser(commands, _add_stabilize_options)
+    from ffviz.compare import add_parser as add_compare_parser
+
+    add_compare_parser(commands)
+    from ffviz.bench import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
+
+    add_bench_parser(commands)
+    return parser
+
+
+def _add_stabilize_command(commands: argparse._SubParsersAction) -> None:
+    """`ffviz stabilize INPUT -o OUTPUT`: one video, with --preview, --start and --compare."""
     p = commands.add_parser("stabilize", help="stabilize a video", description="Stabilize a video file.",
                             epilog=STABILIZE_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("input", type=Path, metavar="INPUT",
@@ -104,6 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUTPUT (and --compare FILE) if it exists (default: refuse)")
 
+
+def _add_demo_command(commands: argparse._SubParsersAction) -> None:
+    """`ffviz demo`: a synthetic shaky video with known motion, stabilized and checked."""
     p = commands.add_parser("demo", help="make a synthetic shaky video with known camera motion, stabilize it, "
                                          "check against the truth",
                             description="Generate a synthetic shaky video with known camera motion (no input "
@@ -119,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: %(default)s)")
     _add_stabilize_options(p, rrd_default=DEFAULT_RECORDINGS / "demo.rrd")
 
+
+def _add_metrics_command(commands: argparse._SubParsersAction) -> None:
+    """`ffviz metrics INPUT OUTPUT`: how steady OUTPUT is."""
     p = commands.add_parser("metrics", help="how steady OUTPUT is compared with INPUT (Liu et al. 2013 + residual "
                                             "jitter)",
                             description="Stabilization measures of OUTPUT against INPUT: residual jitter, "
@@ -128,6 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the stabilized video, with the same number of frames as INPUT")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table (default: a table)")
 
+
+def _add_view_command(commands: argparse._SubParsersAction) -> None:
+    """`ffviz view RECORDING`: the Rerun viewer, on the web or the desktop."""
     p = commands.add_parser("view", help="open a recording (.rrd) in the Rerun viewer",
                             description="Serve a recording to Rerun's web viewer on 127.0.0.1 (offline; open the "
                                         "printed URL in a browser) or open it in the desktop viewer. Ctrl-C stops.")
@@ -139,6 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grpc-port", type=int, default=9876, metavar="PORT",
                    help="TCP port on 127.0.0.1 from which the page streams the recording (default: %(default)s)")
 
+
+def _add_snapshot_command(commands: argparse._SubParsersAction) -> None:
+    """`ffviz snapshot RECORDING`: a PNG of one tab at one frame, rendered headless."""
     p = commands.add_parser("snapshot", help="a PNG of what the viewer shows for a recording at a frame, on a tab",
                             description="Render what the Rerun viewer shows for RECORDING at --frame on --tab, "
                                         "headless (the native viewer without a window; needs `ffmpeg` on PATH to "
@@ -154,6 +183,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--size", default="1280x800", metavar="WxH",
                    help="viewer window size in points; the PNG may be at twice that (default: %(default)s)")
 
+
+def _add_figures_command(commands: argparse._SubParsersAction) -> None:
+    """`ffviz figures RECORDING`: the thesis-style figures from a recording."""
     p = commands.add_parser("figures", help="render the thesis-style figures from a recording (PNG, PDF or SVG)",
                             description="Render figures (trajectories, stabilized vs original, completion, motion "
                                         "inpainting, deblurring, blurriness, mosaic variance) from a recording "
@@ -167,17 +199,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=_frame_list, default=None, metavar="T1,T2,...",
                    help="frame numbers (from 0) to show in the frame comparisons (default: the frames the "
                         "recording traced, else a few spread over the video)")
-
-    from ffviz.batch import add_parser as add_batch_parser  # imports no Ray: that happens when a batch runs
-
-    add_batch_parser(commands, _add_stabilize_options)
-    from ffviz.compare import add_parser as add_compare_parser
-
-    add_compare_parser(commands)
-    from ffviz.bench import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
-
-    add_bench_parser(commands)
-    return parser
 
 
 def _record_size(text: str) -> int | None:
@@ -200,6 +221,21 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                            rrd_folder: bool = False) -> None:
     """The options of one stabilization, shared by stabilize, demo and batch. ``rrd_folder``: --rrd names a
     folder of recordings, one per video, and there is no --workers (batch: one thread per Ray task)."""
+    _add_path_options(p)
+    _add_crop_options(p)
+    _add_motion_options(p)
+    _add_completion_options(p)
+    _add_recording_options(p, rrd_default, rrd_folder=rrd_folder)
+    _add_encoding_options(p)
+    if rrd_folder:
+        return
+    p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
+                   help="frames processed at once, on threads; the frames written are the same for any N "
+                        "(default: one per CPU core, here %d)" % (os.cpu_count() or 1))
+
+
+def _add_path_options(p: argparse.ArgumentParser) -> None:
+    """--mode and how the camera path is planned: its smoothing, its planner and the bounds it keeps."""
     p.add_argument("--mode", choices=stab.OUTPUT_MODES, default="full",
                    help="full: missing areas completed from neighbouring frames (full frame, no crop); "
                         "crop: a window scaled back to full size, valid in every frame but for a small share "
@@ -243,6 +279,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "5-:gaussian:80 (either end may be left out; the rest of the clip follows --path); the path "
                         "eases from one setting into the next over a second, without a jump; may be given several "
                         "times (default: none)")
+
+
+def _add_crop_options(p: argparse.ArgumentParser) -> None:
+    """The crop window of --mode crop: fixed or adaptive, its size, and the share of it that may be completed."""
     p.add_argument("--crop", choices=adaptive_crop.CROPS, default="fixed",
                    help="with --mode crop: fixed, one window valid in every frame; adaptive, a window whose zoom "
                         "follows the path (wider where the camera is calm), never showing black (default: "
@@ -259,6 +299,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "frames are at most SHARE of the output's pixels over the clip, completed from neighbouring "
                         "frames as in full mode; 0: a window inside every frame, nothing synthesized, on the auto "
                         "path at -k 30 (default: " + f"{stab.DEFAULT_CROP_FILL:g}" + ")")
+
+
+def _add_motion_options(p: argparse.ArgumentParser) -> None:
+    """How the camera motion between frames is estimated: the model, what it ignores, rolling shutter, ECC."""
     p.add_argument("--motion-model", choices=motion.MOTION_MODELS, default="affine",
                    help="camera motion fitted between frames: similarity (shift, rotation, zoom), affine (also "
                         "shear) or homography (also perspective) (default: %(default)s)")
@@ -276,6 +320,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
     p.add_argument("--refine", choices=motion.REFINEMENTS, default="none",
                    help="ecc: refine each motion estimate by hierarchical coarse-to-fine direct alignment "
                         "(slower) (default: %(default)s)")
+
+
+def _add_completion_options(p: argparse.ArgumentParser) -> None:
+    """Deblurring and the effort of full mode's completion."""
     p.add_argument("--no-deblur", dest="deblur", action="store_false",
                    help="leave motion-blurred frames as they are (default: sharpen them with the pixels of sharper "
                         "neighbouring frames, thesis ch. 5)")
@@ -287,6 +335,10 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "warp from two neighbours at half the flow resolution, no local registration, deblurring over "
                         "+-3 frames: less CPU "
                         "for some PSNR in the filled borders; docs/benchmarks-speed.md) (default: %(default)s)")
+
+
+def _add_recording_options(p: argparse.ArgumentParser, rrd_default: Path | None, *, rrd_folder: bool) -> None:
+    """The Rerun recording: where it goes (a file, or a folder for batch), live viewing, and its detail."""
     if rrd_folder:
         p.add_argument("--rrd", type=Path, nargs="?", const=Path("AUTO"), default=rrd_default, metavar="DIR",
                        help="write one Rerun recording per video, DIR/<input name>.rrd; --rrd alone: "
@@ -320,23 +372,22 @@ def _add_stabilize_options(p: argparse.ArgumentParser, rrd_default: Path | None 
                         "and 'fmm_step'), or 'none' (default: 3 frames with missing area at --record full, none "
                         "at summary)")
     _deprecated(p, "--trace-frames", "--frames", dest="frames", type=_frame_list)
-    p.add_argument("--codec", choices=video_io.VIDEO_CODECS, default="auto",
+
+
+def _add_encoding_options(p: argparse.ArgumentParser) -> None:
+    """The output video's encoder and its quality settings (pipeline.runtime.encoding.Encoding)."""
+    p.add_argument("--codec", choices=VIDEO_CODECS, default="auto",
                    help="output video: auto (h264 for 8-bit input, hevc for 10/12-bit and HDR input), h264 (x264; "
                         "--crf, --preset), hevc (x265; --crf, --preset) or mpeg4 (MPEG-4 Part 2, what OpenCV's XVID "
                         "writer uses; --qscale; 8-bit only): a tenth of x264's CPU for about twice the bits "
                         "(default: %(default)s)")
     p.add_argument("--crf", type=int, default=None,
-                   help="h264 quality, 0-51 (lower is better; default: %d)" % video_io.Encoding.crf)
-    p.add_argument("--preset", choices=video_io.X264_PRESETS, default=None,
+                   help="h264 quality, 0-51 (lower is better; default: %d)" % Encoding.crf)
+    p.add_argument("--preset", choices=X264_PRESETS, default=None,
                    help="h264 speed against file size at the same --crf quality: faster presets encode sooner into "
-                        "larger files (default: %s)" % video_io.Encoding.preset)
+                        "larger files (default: %s)" % Encoding.preset)
     p.add_argument("--qscale", type=int, default=None,
-                   help="mpeg4 quantiser, 2-31 (lower is better; default: %d)" % video_io.Encoding.qscale)
-    if rrd_folder:
-        return
-    p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
-                   help="frames processed at once, on threads; the frames written are the same for any N "
-                        "(default: one per CPU core, here %d)" % (os.cpu_count() or 1))
+                   help="mpeg4 quantiser, 2-31 (lower is better; default: %d)" % Encoding.qscale)
 
 
 def cmd_stabilize(args: argparse.Namespace) -> int:

@@ -32,7 +32,10 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError, InputError
-from pipeline.runtime import video_io
+from pipeline.frames import Frame
+from pipeline.runtime.encoding import Encoding
+from pipeline.runtime.video_info import VideoInfo
+from pipeline.runtime import video_reader, video_writer
 from pipeline.runtime.observer import ProgressFactory, null_progress
 from pipeline.stages import motion
 
@@ -45,7 +48,7 @@ BACKGROUND = (22, 24, 29)  # around and between the videos
 PLOT_BACKGROUND = (34, 37, 44)
 TEXT = (225, 228, 235)
 GAP_PX = 4  # between two videos
-ENCODING = video_io.Encoding(codec="h264", preset="veryfast")  # a viewing aid: x264, CRF 18, a third of medium's CPU
+ENCODING = Encoding(codec="h264", preset="veryfast")  # a viewing aid: x264, CRF 18, a third of medium's CPU
 
 
 @dataclass(frozen=True)
@@ -62,7 +65,7 @@ class Panel:
 class CameraPath:
     """A video's accumulated camera path, one row per frame (pass 1)."""
 
-    info: video_io.VideoInfo
+    info: VideoInfo
     times: np.ndarray  # (N,) seconds since the video's first frame
     xy_angle: np.ndarray  # (N, 3) frame centre in the first frame (x, y px, the video's own pixels), rotation (deg)
     cuts: int  # pairs the estimator took for scene cuts (the path does not move there)
@@ -94,8 +97,8 @@ class CompareReport:
     warnings: tuple[str, ...]
 
 
-def _reader(panel: Panel) -> video_io.VideoReader:
-    return video_io.VideoReader(panel.path, start_s=panel.start_s, end_s=panel.end_s)
+def _reader(panel: Panel) -> video_reader.VideoReader:
+    return video_reader.VideoReader(panel.path, start_s=panel.start_s, end_s=panel.end_s)
 
 
 def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progress=None,
@@ -271,7 +274,7 @@ def _background(lay: _Layout, labels: Sequence[str], plotted: Sequence[np.ndarra
     return np.ascontiguousarray(rgb), maps
 
 
-def _timed(reader: video_io.VideoReader) -> Iterator[tuple[float, video_io.Frame]]:
+def _timed(reader: video_reader.VideoReader) -> Iterator[tuple[float, Frame]]:
     """(seconds since the video's first frame, frame) of each frame."""
     first = None
     for frame in reader:
@@ -282,26 +285,26 @@ def _timed(reader: video_io.VideoReader) -> Iterator[tuple[float, video_io.Frame
 class _Follower:
     """Another video in pass 2: its latest frame at or before a time (its first one before it starts)."""
 
-    def __init__(self, frames: Iterator[tuple[float, video_io.Frame]]) -> None:
+    def __init__(self, frames: Iterator[tuple[float, Frame]]) -> None:
         self._frames = frames
         self.current = next(frames)
         self._next = next(frames, None)
 
-    def at(self, time_s: float) -> video_io.Frame:
+    def at(self, time_s: float) -> Frame:
         while self._next is not None and self._next[0] <= time_s:
             self.current, self._next = self._next, next(self._frames, None)
         return self.current[1]
 
 
-def _reader_info(panel: Panel) -> video_io.VideoInfo:
-    info = video_io.probe_video(panel.path)
+def _reader_info(panel: Panel) -> VideoInfo:
+    info = video_reader.probe_video(panel.path)
     if panel.start_s is not None or panel.end_s is not None:
-        info = video_io.clipped_info(info, panel.start_s, panel.end_s)
+        info = video_reader.clipped_info(info, panel.start_s, panel.end_s)
     return info
 
 
 def compose(background: np.ndarray, lay: _Layout, axes: Sequence[_Axis], time_s: float,
-            shown: Sequence[video_io.Frame], plotted: Sequence[np.ndarray]) -> np.ndarray:
+            shown: Sequence[Frame], plotted: Sequence[np.ndarray]) -> np.ndarray:
     """One output frame: the videos' frames ``shown`` (scaled to the layout) on the background, and a cursor at
     ``time_s`` on each plot with a dot on each video's path at the frame shown."""
     out = background.copy()
@@ -325,7 +328,7 @@ def compose(background: np.ndarray, lay: _Layout, axes: Sequence[_Axis], time_s:
 
 def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = False, height: int | None = None,
             shortest: bool = False, progress: ProgressFactory = null_progress,
-            encoding: video_io.Encoding = ENCODING) -> CompareReport:
+            encoding: Encoding = ENCODING) -> CompareReport:
     """Write the side-by-side of ``panels`` (the first is the input: its frames, timing and audio lead) to
     ``output``. Raises InputError for a video that cannot be read or is shorter than the input (unless
     ``shortest``), OutputError for an output that is one of the videos or exists (unless ``overwrite``).
@@ -337,21 +340,43 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
         raise ConfigError(f"height must be between 16 and 4320 px, not {height}")
     infos = [_reader_info(panel) for panel in panels]  # every video readable before anything is written
     for panel in panels:  # the output is none of the videos (before saying it exists)
-        video_io.check_output_path(output, panel.path, overwrite=True)
-    video_io.check_output_path(output, panels[0].path, overwrite=overwrite)
+        video_writer.check_output_path(output, panel.path, overwrite=True)
+    video_writer.check_output_path(output, panels[0].path, overwrite=overwrite)
 
+    paths = _camera_paths(panels, infos, progress)
+    lead = paths[0]
+    end_s = _common_end(panels, paths, shortest)
+    sizes = [(p.info.width, p.info.height) for p in paths]
+    lay = layout(sizes, height or lead.info.height)
+    scales = [lay.video_height / h for _, h in sizes]  # each video's px to the comparison's
+    plotted = [p.xy_angle * np.array([s, s, 1.0]) for p, s in zip(paths, scales)]
+    shown = [p.times < end_s - 0.5 / float(p.info.fps) for p in paths]  # the part of each that is shown
+    background, axes = _background(lay, [panel.label for panel in panels], [xy[s] for xy, s in zip(plotted, shown)],
+                                   [p.times[s] for p, s in zip(paths, shown)], end_s)
+    summaries = _summaries(panels, paths, plotted, shown)
+    written, warnings = _write_side_by_side(panels, output, lead, end_s, _Picture(background, lay, axes, plotted),
+                                            progress, encoding)
+    return CompareReport(output, written, lay.width, lay.height, tuple(summaries), tuple(warnings))
+
+
+def _camera_paths(panels: Sequence[Panel], infos: Sequence[VideoInfo], progress: ProgressFactory) -> list[CameraPath]:
+    """Pass 1: every video's camera path, two videos at a time."""
     bar = progress("compare 1/2: camera paths", sum(info.frame_count for info in infos) or None)
     stop = threading.Event()
     try:
         with ThreadPoolExecutor(max_workers=min(len(panels), 2)) as pool:
             try:
-                paths = list(pool.map(lambda panel: camera_path(panel, progress=bar, stop=stop), panels))
+                return list(pool.map(lambda panel: camera_path(panel, progress=bar, stop=stop), panels))
             except BaseException:  # Ctrl-C, SIGTERM or a video's error: the other threads stop at their next frame
                 stop.set()
                 raise
     finally:
         bar.close()
 
+
+def _common_end(panels: Sequence[Panel], paths: Sequence[CameraPath], shortest: bool) -> float:
+    """Where the comparison ends (seconds): the input's end, or with ``shortest`` the shortest video's; a video
+    that ends before the input without ``shortest`` is an InputError."""
     lead = paths[0]
     fps = float(lead.info.fps)
     end_s = lead.end_s
@@ -363,43 +388,60 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
                     f"({lead.end_s:.2f} s, {len(lead.times)} frames): pass --shortest to end the comparison with the "
                     f"shortest video")
             end_s = min(end_s, path.end_s)
+    return end_s
 
-    sizes = [(p.info.width, p.info.height) for p in paths]
-    lay = layout(sizes, height or lead.info.height)
-    scales = [lay.video_height / h for _, h in sizes]  # each video's px to the comparison's
-    plotted = [p.xy_angle * np.array([s, s, 1.0]) for p, s in zip(paths, scales)]
-    shown = [p.times < end_s - 0.5 / float(p.info.fps) for p in paths]  # the part of each that is shown
-    background, axes = _background(lay, [panel.label for panel in panels], [xy[s] for xy, s in zip(plotted, shown)],
-                                   [p.times[s] for p, s in zip(paths, shown)], end_s)
+
+def _summaries(panels: Sequence[Panel], paths: Sequence[CameraPath], plotted: Sequence[np.ndarray],
+               shown: Sequence[np.ndarray]) -> list[PanelSummary]:
+    """Each video's line of the report: frames shown, size, and the residual jitter of its path over them."""
     from pipeline.evaluation import metrics  # here: it imports scipy.ndimage, which `ffviz --help` need not
 
     summaries = []
-    for panel, path, xy_angle, shown in zip(panels, paths, plotted, shown):
-        jitter_px, jitter_deg = metrics.residual_jitter(xy_angle[shown] * np.array([1.0, 1.0, math.pi / 180.0]),
+    for panel, path, xy_angle, part in zip(panels, paths, plotted, shown):
+        jitter_px, jitter_deg = metrics.residual_jitter(xy_angle[part] * np.array([1.0, 1.0, math.pi / 180.0]),
                                                         float(path.info.fps))
-        summaries.append(PanelSummary(panel.label, panel.path, int(shown.sum()), path.info.width,
+        summaries.append(PanelSummary(panel.label, panel.path, int(part.sum()), path.info.width,
                                       path.info.height, jitter_px, jitter_deg))
+    return summaries
 
+
+@dataclass(frozen=True)
+class _Picture:
+    """What every output frame shares: the background with labels and plots, its layout, the plots' axes, and each
+    video's path in the comparison's pixels."""
+    background: np.ndarray
+    lay: _Layout
+    axes: list[_Axis]
+    plotted: list[np.ndarray]
+
+
+def _write_side_by_side(panels: Sequence[Panel], output: Path, lead: CameraPath, end_s: float, picture: _Picture,
+                        progress: ProgressFactory, encoding: Encoding) -> tuple[int, list[str]]:
+    """Pass 2: the input's frames up to ``end_s``, each beside the other videos' frames of its time, written to
+    ``output`` with the input's timing and audio. (Frames written, the readers' and the writer's warnings.)"""
+    fps = float(lead.info.fps)
     leeway = 0.5 / fps
     # A clip: the output starts at the input's first frame, and the audio ends with the last frame written.
     # 8 bits (the frames are read as uint8; 8-bit H.264 plays everywhere), the input's matrix, range and tags.
     like = dataclasses.replace(lead.info, clip=lead.info.clip or (0.0, end_s),
                                colour=dataclasses.replace(lead.info.colour, bit_depth=8))
     audio_from = panels[0].path if lead.info.has_audio else None
+    lay = picture.lay
     bar = progress("compare 2/2: side by side + encode", len(lead.times))
-    readers: list[video_io.VideoReader] = []
+    readers: list[video_reader.VideoReader] = []
     writer = None
     written = 0
     try:
         readers = [_reader(panel) for panel in panels]
-        writer = video_io.VideoWriter(output, like=like, width=lay.width, height=lay.height, audio_from=audio_from,
-                                      encoding=encoding)
+        writer = video_writer.VideoWriter(output, like=like, width=lay.width, height=lay.height, audio_from=audio_from,
+                                          encoding=encoding)
         followers = [_Follower(_timed(reader)) for reader in readers[1:]]
         for time_s, frame in _timed(readers[0]):
             if time_s >= end_s - leeway:
                 break
             shown = [frame] + [follower.at(time_s + leeway) for follower in followers]
-            writer.write(compose(background, lay, axes, time_s, shown, plotted), pts=frame.pts, time_s=frame.time_s)
+            writer.write(compose(picture.background, lay, picture.axes, time_s, shown, picture.plotted),
+                         pts=frame.pts, time_s=frame.time_s)
             written += 1
             bar.update()
         writer.close()
@@ -411,8 +453,7 @@ def compare(panels: Sequence[Panel], output: Path | str, *, overwrite: bool = Fa
         for reader in readers:
             reader.close()
         bar.close()
-    warnings = [*writer.warnings, *(w for reader in readers for w in reader.warnings)]
-    return CompareReport(output, written, lay.width, lay.height, tuple(summaries), tuple(warnings))
+    return written, [*writer.warnings, *(w for reader in readers for w in reader.warnings)]
 
 
 # -- the command line: `ffviz compare`, and `ffviz stabilize --compare / --preview / --start` ------------------
@@ -500,7 +541,7 @@ def preview_range(args) -> tuple[float | None, float | None]:
 
 def check_compare_path(path: Path, input_path: Path, output_path: Path, *, overwrite: bool) -> None:
     """--compare FILE: refused like any output, and it must not be the stabilized output either."""
-    video_io.check_output_path(path, input_path, overwrite=overwrite)
+    video_writer.check_output_path(path, input_path, overwrite=overwrite)
     if Path(path).absolute() == Path(output_path).absolute():
         raise ConfigError(f"--compare {path} is the stabilized output itself: name another file")
 

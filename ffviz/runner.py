@@ -18,7 +18,8 @@ from typing import Sequence
 from pipeline.stages import adaptive_crop, deblur, motion, path_control, smoothing
 from pipeline import presets
 from pipeline import stabilize as stab
-from pipeline.runtime import video_io
+from pipeline.runtime.encoding import CODEC_OPTIONS, Encoding
+from pipeline.runtime import video_writer
 from pipeline.errors import ConfigError
 from pipeline.runtime.observer import Observer, Observers
 from pipeline.runtime.source import FileSource
@@ -30,7 +31,7 @@ MIN_SIGMA, MAX_SIGMA = 1e-6, 1e6  # frames
 
 def _check_options(args: argparse.Namespace) -> None:
     """What the configs cannot check: values argparse parses but the run or the kernel cannot use (the
-    encoder's values are video_io.Encoding's to check)."""
+    encoder's values are Encoding's to check)."""
     if getattr(args, "workers", None) is not None and args.workers < 1:
         raise ConfigError(f"--workers must be at least 1, not {args.workers}")
     if getattr(args, "tripod", False) and getattr(args, "path", None) not in (None, "gaussian", "tripod"):
@@ -98,17 +99,17 @@ def stabilize_config(args: argparse.Namespace) -> stab.StabilizeConfig:
         raise ConfigError(str(error)) from None
 
 
-def output_encoding(args: argparse.Namespace) -> video_io.Encoding:
+def output_encoding(args: argparse.Namespace) -> Encoding:
     """--codec and the quality options that belong to it (one that belongs to another codec is an error)."""
-    own = video_io.CODEC_OPTIONS[args.codec]
-    every = [name for names in video_io.CODEC_OPTIONS.values() for name in names]
+    own = CODEC_OPTIONS[args.codec]
+    every = [name for names in CODEC_OPTIONS.values() for name in names]
     given = {name: getattr(args, name) for name in every if getattr(args, name) is not None}
     stray = [f"--{name}" for name in given if name not in own]
     if stray:
         raise ConfigError(f"{' and '.join(stray)} {'does' if len(stray) == 1 else 'do'} not apply to --codec "
                           f"{args.codec} (its options: {', '.join('--' + n for n in own)})")
     try:
-        return video_io.Encoding(codec=args.codec, **given)
+        return Encoding(codec=args.codec, **given)
     except ConfigError as error:
         raise ConfigError(f"--{error}") from None
 
@@ -180,7 +181,7 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
                                     workers=getattr(args, "workers", None))
         else:  # --preview / --start: only that stretch of the input is read, and written from 0 s on
             source = FileSource(input_path, start_s=start_s, end_s=end_s)
-            video_io.check_output_path(output_path, input_path, overwrite=overwrite)
+            video_writer.check_output_path(output_path, input_path, overwrite=overwrite)
             report = stab.stabilize_source(source, output_path, config, observer=Observers(recorder, *observers),
                                            progress=tqdm_progress, encoding=encoding,
                                            workers=getattr(args, "workers", None))

@@ -21,10 +21,12 @@ from typing import Callable, Iterable, Iterator
 from pipeline.config import StabilizeConfig
 from pipeline import geometry
 from pipeline.results import FrameResult, MotionPass, PathComparison, PathPlan, Stamp
-from pipeline.runtime import parallel, video_io
+from pipeline.frames import Frame
+from pipeline.runtime import parallel
 from pipeline.runtime.source import FrameSource, one_pass
-from pipeline.runtime.window import RENDER_SLACK_FRAMES, PerFrame, Windowed, sliding_window
+from pipeline.runtime.window import RENDER_SLACK_FRAMES, Windowed, sliding_window
 from pipeline.stages import adaptive_crop, completion, deblur, neighbours, rolling_shutter, smoothing, temporal, warping
+from pipeline.stages.per_frame import PerFrame
 
 import numpy as np
 
@@ -245,7 +247,7 @@ class FrameChain:
         downscaled.forget_before(t - self.config.completion_frames - RENDER_SLACK_FRAMES)
         return downscaled
 
-    def __call__(self, window: Windowed[video_io.Frame]) -> FrameResult:
+    def __call__(self, window: Windowed[Frame]) -> FrameResult:
         config = self.config
         frame = window.centre
         t = min(frame.index, len(self.orig_from_stab) - 1)  # decoding is deterministic: pass 2 sees pass 1's frames
@@ -300,6 +302,7 @@ class FrameChain:
         if config.deblurring:
             # Last, on the frame as it will be written: completion's warped neighbours are reused, completed pixels
             # are sharpened like the rest, missing pixels of --mode none stay missing (docs/deblurring.md).
+            self.energy_cache.forget_before(t - config.deblur.neighbour_frames - RENDER_SLACK_FRAMES)
             deblurred = deblur.deblur_frame(output, output_valid, t, {**same_shot, t: original},
                                             self.curr_from_prev, self.orig_from_out[t], config.deblur,
                                             warped=warped, cache=self.energy_cache)
@@ -369,7 +372,7 @@ def render_frames(source: FrameSource, plan: PathPlan, config: StabilizeConfig, 
     chain = FrameChain(plan, config, keep=keep)
     margin = chain.temporal_radius
     with one_pass(source) as decoded:
-        windows: Iterable[Windowed[video_io.Frame]] = sliding_window(decoded, config.window_frames)
+        windows: Iterable[Windowed[Frame]] = sliding_window(decoded, config.window_frames)
         if frames is not None:
             first, stop = frames.start - margin, frames.stop + margin
             windows = (w for w in itertools.takewhile(lambda w: w.centre.index < stop, windows)

@@ -14,7 +14,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from pipeline.runtime.video_io import Frame
+from pipeline.frames import Frame
 from pipeline.stages.completion import CompletionResult
 from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages.deblur import DeblurResult

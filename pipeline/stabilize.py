@@ -1,7 +1,7 @@
 """Stabilize a video: pass 1 estimates the motion of every frame pair (chapter 3), the path is planned as a whole
 (pipeline/chain.py), pass 2 renders every frame through the per-frame chain and writes it. ``run_passes`` is
-the one orchestration; ``stabilize_source`` runs both passes in this process (threads), pipeline/runtime/
-segments.py runs them segment by segment through a mapper (serial or Ray). Memory is bounded by the frame
+the one orchestration; ``stabilize_source`` runs both passes in this process (threads), pipeline/segments.py
+runs them segment by segment through a mapper (serial or Ray). Memory is bounded by the frame
 window, not by the video's length: pass 1 keeps the previous downscaled frame and one 3x3 matrix per frame.
 """
 
@@ -20,7 +20,10 @@ from pipeline.config import (DEFAULT_CROP_FILL, DEFAULT_PATHS, DEFAULT_RADII, HA
                              OutputMode, StabilizeConfig, default_path, default_radius)
 from pipeline.errors import ConfigError, InputError
 from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
-from pipeline.runtime import parallel, video_io
+from pipeline.frames import Frame
+from pipeline.runtime.encoding import Encoding
+from pipeline.runtime.video_info import VideoInfo
+from pipeline.runtime import parallel, video_reader, video_writer
 from pipeline.runtime.observer import NullObserver, Observer, ProgressFactory, is_null, null_progress
 from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, one_pass
 from pipeline.stages.adaptive_crop import AdaptiveCrop
@@ -66,7 +69,7 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
 
     ignore = _IgnoreMasks(config, source.info.width, source.info.height)
 
-    def pairs(decoded: Iterable[video_io.Frame]) -> Iterator[_MotionPair]:
+    def pairs(decoded: Iterable[Frame]) -> Iterator[_MotionPair]:
         """Each frame with its predecessor, prepared (downscaled, histogram) on this thread."""
         previous: motion.PreparedFrame | None = None
         for frame in decoded:
@@ -133,8 +136,8 @@ class _IgnoreMasks:
                 raise ConfigError(f"ignore box {box.x},{box.y},{box.width},{box.height} reaches outside the "
                                   f"{width}x{height} frame")
         self.still: np.ndarray | None = None
-        self.reader: video_io.VideoReader | None = None
-        self.frames: Iterator[video_io.Frame] | None = None
+        self.reader: video_reader.VideoReader | None = None
+        self.frames: Iterator[Frame] | None = None
         if config.ignore_mask is not None:
             path = Path(config.ignore_mask)
             if not path.is_file():
@@ -143,7 +146,7 @@ class _IgnoreMasks:
             if image is not None:
                 self.still = self._checked(image > 127, path)
             else:
-                self.reader = video_io.VideoReader(path)
+                self.reader = video_reader.VideoReader(path)
                 self.frames = iter(self.reader)
                 self.path = path
 
@@ -153,7 +156,7 @@ class _IgnoreMasks:
                              f"{self.size[0]}x{self.size[1]}")
         return mask
 
-    def at(self, frame: video_io.Frame) -> np.ndarray | None:
+    def at(self, frame: Frame) -> np.ndarray | None:
         mask = self.still
         if self.frames is not None:
             picture = next(self.frames, None)
@@ -175,7 +178,7 @@ class _IgnoreMasks:
 
 @dataclass(frozen=True)
 class _MotionPair:
-    frame: video_io.Frame
+    frame: Frame
     previous: motion.PreparedFrame | None  # None: the first frame (of the video, or after nothing decodable)
     prepared: motion.PreparedFrame
     decoder_warnings: list[str]  # raised while decoding up to this frame
@@ -191,7 +194,7 @@ def _forward_warnings(source: FrameSource, stamp: Stamp | None, observer: Observ
 
 def stabilize(input_path: Path | str, output_path: Path | str | None, config: StabilizeConfig = StabilizeConfig(), *,
               observer: Observer | None = None, progress: ProgressFactory = null_progress,
-              overwrite: bool = False, encoding: video_io.Encoding = video_io.Encoding(),
+              overwrite: bool = False, encoding: Encoding = Encoding(),
               workers: int | None = None) -> StabilizeReport:
     """Stabilize ``input_path`` into ``output_path`` (None: run and observe, write nothing).
 
@@ -201,14 +204,14 @@ def stabilize(input_path: Path | str, output_path: Path | str | None, config: St
     output_path = Path(output_path) if output_path is not None else None
     source = FileSource(input_path)
     if output_path is not None:
-        video_io.check_output_path(output_path, input_path, overwrite=overwrite)
+        video_writer.check_output_path(output_path, input_path, overwrite=overwrite)
     return stabilize_source(source, output_path, config, observer=observer, progress=progress, encoding=encoding,
                             workers=workers)
 
 
 def stabilize_source(source: FrameSource, output_path: Path | None, config: StabilizeConfig = StabilizeConfig(), *,
                      observer: Observer | None = None, progress: ProgressFactory = null_progress,
-                     encoding: video_io.Encoding = video_io.Encoding(), workers: int | None = None,
+                     encoding: Encoding = Encoding(), workers: int | None = None,
                      ) -> StabilizeReport:
     """Both passes in this process over any frame source (``workers`` threads); the output must be checked."""
     observer = observer or NullObserver()
@@ -235,9 +238,9 @@ def stabilize_source(source: FrameSource, output_path: Path | None, config: Stab
     return run_passes(source.info, output_path, config, motion_pass, frames, observer=observer, encoding=encoding)
 
 
-def run_passes(info: video_io.VideoInfo, output_path: Path | None, config: StabilizeConfig,
+def run_passes(info: VideoInfo, output_path: Path | None, config: StabilizeConfig,
                motion_pass: Callable[[], MotionPass], frames: Callable[[PathPlan], Iterable[FrameResult]], *,
-               observer: Observer, encoding: video_io.Encoding) -> StabilizeReport:
+               observer: Observer, encoding: Encoding) -> StabilizeReport:
     """The one orchestration of a run, whoever executes its passes.
 
     ``motion_pass()``: pass 1 (its per-frame warnings already shown to ``observer``); ``frames(plan)``: pass 2's
@@ -259,8 +262,8 @@ def run_passes(info: video_io.VideoInfo, output_path: Path | None, config: Stabi
     started = time.perf_counter()
     writer = None
     if output_path is not None:
-        writer = video_io.VideoWriter(output_path, like=info, audio_from=info.path if info.has_audio else None,
-                                      encoding=encoding)
+        writer = video_writer.VideoWriter(output_path, like=info, audio_from=info.path if info.has_audio else None,
+                                          encoding=encoding)
     try:
         for result in frames(plan):
             observer.on_frame(result)

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from ffviz import batch, cli
-from pipeline.runtime import segments, video_io
+from pipeline.runtime.encoding import Encoding
+from pipeline.runtime import video_reader
+from pipeline import segments
 from pipeline.evaluation import synthetic
 from pipeline import stabilize as stab
 from pipeline.runtime.observer import StageCollector
@@ -73,7 +75,7 @@ def test_rerun_skips_complete_outputs_and_redoes_changed_settings(batch_run, cap
     jobs, first = batch_run
     again = batch.run_batch(jobs, jobs=2)
     assert [r.status for r in again] == ["skipped", "failed", "skipped", "skipped"]
-    changed = [batch.VideoJob(job.input, job.output, job.config, encoding=video_io.Encoding(crf=job.encoding.crf + 1))
+    changed = [batch.VideoJob(job.input, job.output, job.config, encoding=Encoding(crf=job.encoding.crf + 1))
                for job in jobs]
     assert not any(batch.is_complete(job) for job in changed)
     # The CLI over the same folder (Ray already up): summary table, failure's exit code.
@@ -126,9 +128,9 @@ def test_segmented_output_keeps_the_audio_and_the_timing(tmp_path):
     out = tmp_path / "out.mp4"
     # Segments run in this process here (serial_map): what is checked is the join, not Ray.
     segments.run(clip, out, stab.StabilizeConfig(mode="none"), segment_frames=12)
-    source, result = video_io.probe_video(clip), video_io.probe_video(out)
+    source, result = video_reader.probe_video(clip), video_reader.probe_video(out)
     assert result.has_audio
-    assert video_io.count_frames(out) == video_io.count_frames(clip) == 40
+    assert video_reader.count_frames(out) == video_reader.count_frames(clip) == 40
     assert result.fps == source.fps and (result.width, result.height) == (source.width, source.height)
     codec, seconds = audio_seconds(out)
     assert codec == "aac" and abs(seconds - audio_seconds(clip)[1]) < 0.05

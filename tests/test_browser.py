@@ -31,7 +31,7 @@ import pytest
 
 from ffviz.recorder import RerunRecorder
 from pipeline.evaluation import synthetic
-from pipeline.runtime.video_io import VideoReader
+from pipeline.runtime.video_reader import VideoReader
 from pipeline.stabilize import StabilizeConfig, stabilize
 
 pytestmark = pytest.mark.slow

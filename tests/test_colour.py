@@ -21,7 +21,7 @@ import pytest
 
 from ffviz import cli
 from pipeline.runtime import colour as colours
-from pipeline.runtime import video_io
+from pipeline.runtime import video_reader, video_writer
 from pipeline.runtime.colour import ColourDescription
 
 W, H, N = 160, 96, 16
@@ -149,12 +149,12 @@ def assert_faithful(input_path, output_path, kind: str) -> None:
 def test_reader_and_writer_alone_keep_tags_depth_and_colour(clip, tmp_path):
     kind, path = clip
     output = tmp_path / "copy.mp4"
-    with video_io.VideoReader(path, keep_depth=True) as reader:
+    with video_reader.VideoReader(path, keep_depth=True) as reader:
         description = reader.info.colour
         assert description == ColourDescription(**{**CLIPS[kind][2].__dict__, "pix_fmt": description.pix_fmt,
                                                    "chroma_location": description.chroma_location})  # as written
         assert description.chroma_location in ("left", None)  # x264's and x265's default (None: no ffprobe)
-        with video_io.VideoWriter(output, like=reader.info) as writer:
+        with video_writer.VideoWriter(output, like=reader.info) as writer:
             for frame in reader:
                 assert frame.rgb.dtype == (np.float32 if description.deep else np.uint8)
                 writer.write(frame.rgb, pts=frame.pts)
@@ -168,10 +168,10 @@ def test_a_one_or_two_picture_hevc_output_is_written_every_time(frames, tmp_path
     the writer must still produce a whole file that decodes to every picture, however often it is tried."""
     path = tmp_path / "hlg.mp4"
     make_clip(path, "bt2020_hlg_10bit")
-    like = video_io.probe_video(path)
+    like = video_reader.probe_video(path)
     for attempt, garbage in enumerate([None, -94218684620720, -4611756388245323776, 7, None, None]):
         output = tmp_path / f"out{attempt}.mp4"
-        with video_io.VideoWriter(output, like=like) as writer:
+        with video_writer.VideoWriter(output, like=like) as writer:
             if garbage is not None:  # what libx265 hands back on a bad run, made certain
                 encode = writer._video.encode
 
@@ -201,7 +201,7 @@ def test_8bit_reader_still_gives_uint8_by_the_input_matrix(tmp_path):
     """Without keep_depth a 10-bit clip reads as uint8, by its own (BT.2020) matrix: within a level of the truth."""
     path = tmp_path / "hlg.mp4"
     make_clip(path, "bt2020_hlg_10bit")
-    with video_io.VideoReader(path) as reader:
+    with video_reader.VideoReader(path) as reader:
         frame = next(iter(reader))
     assert frame.rgb.dtype == np.uint8
     assert np.abs(frame.rgb[REGION].reshape(-1, 3).mean(axis=0) - PATCH_RGB).max() < 1.0
@@ -410,7 +410,7 @@ def located_clip(request, tmp_path_factory):
 @pytest.mark.parametrize("mode", ["none", "crop", "full"])
 def test_every_mode_keeps_the_chroma_location(located_clip, mode, tmp_path, capsys):
     location, path = located_clip
-    assert video_io.probe_video(path).colour.chroma_location == location
+    assert video_reader.probe_video(path).colour.chroma_location == location
     output = tmp_path / f"{mode}.mp4"
     assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", mode]) == 0
     assert ffprobe_chroma_location(output) == location
@@ -517,7 +517,7 @@ def test_without_ffprobe_the_chroma_location_is_unknown_and_the_job_runs(tmp_pat
             (bin_dir / "ffprobe").write_text(fake_ffprobe)
             (bin_dir / "ffprobe").chmod(0o755)
         monkeypatch.setenv("PATH", str(bin_dir))
-        info = video_io.probe_video(path)
+        info = video_reader.probe_video(path)
         assert info.colour.chroma_location is None
         assert info.colour.summary().endswith("8-bit, chroma location unknown")
         output = tmp_path / f"out{fake_ffprobe is None}.mp4"
@@ -560,17 +560,17 @@ def test_hdr10plus_input_says_in_one_line_that_its_dynamic_metadata_is_not_kept(
     with av.open(str(path)) as container:
         first = next(container.decode(video=0))
         assert av.sidedata.sidedata.Type.DYNAMIC_HDR_PLUS in [side.type for side in first.side_data]
-    assert video_io.probe_video(path).colour.dynamic_metadata == "HDR10+"
+    assert video_reader.probe_video(path).colour.dynamic_metadata == "HDR10+"
     output = tmp_path / "out.mp4"
     assert cli.main(["stabilize", str(path), "-o", str(output), "--mode", "none"]) == 0
     warnings = [line for line in capsys.readouterr().err.splitlines() if "warning" in line.lower()]
     assert len(warnings) == 1 and "HDR10+ dynamic metadata is not carried over" in warnings[0], warnings
     assert "plain HDR10" in warnings[0]
     assert_faithful(path, output, "bt2020_pq_10bit")  # mastering display and MaxCLL among the tags compared
-    assert video_io.probe_video(output).colour.dynamic_metadata is None
+    assert video_reader.probe_video(output).colour.dynamic_metadata is None
     # the clip without the SEI says nothing (the warning is the SEI's)
     make_clip(tmp_path / "hdr10.mp4", "bt2020_pq_10bit")
-    assert video_io.probe_video(tmp_path / "hdr10.mp4").colour.dynamic_metadata is None
+    assert video_reader.probe_video(tmp_path / "hdr10.mp4").colour.dynamic_metadata is None
 
 
 class _FrameWithSideData:
@@ -605,8 +605,8 @@ def test_dolby_vision_side_data_is_detected_and_warned_of_once(kind, tmp_path):
         described = colours.describe(_FrameWithSideData(frame, _SideData(getattr(av.sidedata.sidedata.Type, kind))))
     assert plain.dynamic_metadata is None and described.dynamic_metadata == "Dolby Vision"
     assert dataclasses.replace(described, dynamic_metadata=None) == plain  # nothing else read differently
-    like = dataclasses.replace(video_io.probe_video(path), colour=described)
-    with video_io.VideoWriter(tmp_path / "out.mp4", like=like) as writer:
+    like = dataclasses.replace(video_reader.probe_video(path), colour=described)
+    with video_writer.VideoWriter(tmp_path / "out.mp4", like=like) as writer:
         writer.write(np.zeros((H, W, 3), np.float32))
     assert writer.warnings == ["the input's Dolby Vision dynamic metadata is not carried over: the output is plain "
                                "HLG, tags kept"]

@@ -15,7 +15,8 @@ from ffviz import cli
 from ffviz import compare as cmp
 from pipeline import geometry
 from pipeline.evaluation import synthetic
-from pipeline.runtime import video_io
+from pipeline.frames import Frame
+from pipeline.runtime import video_reader
 
 FPS = 30
 N = 45  # 1.5 s
@@ -65,8 +66,8 @@ def amplitude(samples: np.ndarray) -> float:
     return float(np.sqrt(2.0 * np.mean(samples.astype(np.float64) ** 2)))
 
 
-def read(path: Path) -> list[video_io.Frame]:
-    with video_io.VideoReader(path) as reader:
+def read(path: Path) -> list[Frame]:
+    with video_reader.VideoReader(path) as reader:
         return list(reader)
 
 
@@ -100,7 +101,7 @@ def test_compare_writes_even_size_every_frame_and_the_input_audio(clip, tmp_path
     out = tmp_path / "sbs.mp4"
     assert cli.main(["compare", str(clip["input"]), str(clip["small"]), "-o", str(out)]) == 0
     lay = cmp.layout([(W, H), (W // 2, H // 2)], H)
-    info = video_io.probe_video(out)
+    info = video_reader.probe_video(out)
     assert (info.width, info.height) == (lay.width, lay.height) == (W + cmp.GAP_PX + W, lay.header + H + lay.strip)
     assert info.width % 2 == 0 and info.height % 2 == 0
     assert info.fps == FPS
@@ -196,9 +197,9 @@ def test_bad_input_gets_one_line_and_no_output(clip, tmp_path, capsys, case, cod
 
 
 def test_reading_a_time_range_gives_the_same_frames_as_reading_all(clip):
-    with video_io.VideoReader(clip["input"]) as reader:
+    with video_reader.VideoReader(clip["input"]) as reader:
         everything = list(reader)
-    with video_io.VideoReader(clip["input"], start_s=0.5, end_s=1.0) as reader:
+    with video_reader.VideoReader(clip["input"], start_s=0.5, end_s=1.0) as reader:
         part = list(reader)
         assert reader.info.clip == (0.5, 1.0) and reader.info.frame_count == 15
     assert [f.index for f in part] == list(range(15))
@@ -257,7 +258,7 @@ def test_cursor_dots_land_on_the_path_lines_matplotlib_drew():
 
                 # Measured: 0-15 on the line, 190 or more 8 px above or below it.
                 assert distance(y) < 40 and distance(y - 8) > 120 and distance(y + 8) > 120, (column, i, k)
-    frame = video_io.Frame(index=30, pts=30, time_s=1.0, rgb=np.zeros((H, W, 3), np.uint8))
+    frame = Frame(index=30, pts=30, time_s=1.0, rgb=np.zeros((H, W, 3), np.uint8))
     drawn = cmp.compose(background, lay, axes, 1.0, [frame, frame], paths)
     for ax, (_, column) in zip(axes, cmp.PLOTS):
         x = ax.px(1.0)

@@ -16,7 +16,7 @@ from pipeline.stages import smoothing
 from pipeline.evaluation import metrics
 from pipeline import stabilize
 from pipeline.evaluation import synthetic
-from pipeline.runtime import video_io
+from pipeline.runtime.encoding import Encoding
 from pipeline.errors import ConfigError, FFVizError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -45,7 +45,7 @@ BAD = {
     stabilize.StabilizeConfig: [dict(mode="nope")],
     synthetic.SyntheticConfig: [dict(width=4), dict(n_frames=0), dict(fps=0.0), dict(fps=float("nan")),
                                 dict(object_kind="cat"), dict(n_frames=6, blurred_frames=(6,))],
-    video_io.Encoding: [dict(codec="nope"), dict(crf=52), dict(preset="nope"), dict(qscale=1)],
+    Encoding: [dict(codec="nope"), dict(crf=52), dict(preset="nope"), dict(qscale=1)],
 }
 CASES = [(cls, kwargs) for cls, bad in BAD.items() for kwargs in bad]
 # Classes with required fields: a valid set, which each bad case overrides.

@@ -139,13 +139,13 @@ def test_vplab_woman_stays_as_sharp_as_without_deblurring():
     path = SHARED_VIDEOS / "vplab_C.avi"
     if not path.exists():
         pytest.skip("shared clip vplab_C.avi absent")
-    from pipeline.runtime import video_io
+    from pipeline.runtime import video_reader
     from pipeline.runtime.observer import StageCollector
     from pipeline.runtime.source import ArraySource
     from pipeline.stabilize import stabilize_source
 
     first = 196
-    with video_io.VideoReader(path) as reader:
+    with video_reader.VideoReader(path) as reader:
         frames = [f.rgb for f in reader if f.index >= first]
     collector = StageCollector("deblur")
     stabilize_source(ArraySource(frames, fps=30, name="vplab_C"), None, StabilizeConfig(), observer=collector)

@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 
 from ffviz import cli
 from pipeline.evaluation import synthetic
-from pipeline.runtime import video_io
+from pipeline.runtime import video_reader
 
 EXAMPLES = int(os.environ.get("FFVIZ_FUZZ_EXAMPLES", "40"))
 LONG_EXAMPLES = int(os.environ.get("FFVIZ_FUZZ_LONG_EXAMPLES", "300"))
@@ -150,9 +150,9 @@ def check(outcome: Outcome, source: Path, output: Path, *, before: bytes, existe
     if outcome.code == 0:
         lines = outcome.stderr.strip().splitlines()
         assert all(line.startswith("ffviz: warning: ") for line in lines), outcome.stderr
-        with video_io.VideoReader(source) as reader:
+        with video_reader.VideoReader(source) as reader:
             times_in = [f.time_s for f in reader]
-        with video_io.VideoReader(output) as reader:
+        with video_reader.VideoReader(output) as reader:
             times_out = [f.time_s for f in reader]
         assert times_out == pytest.approx(times_in, abs=1e-6)
         return

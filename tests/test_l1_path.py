@@ -347,7 +347,7 @@ def test_cli_path_options_end_to_end(tmp_path, capsys):
     line."""
     from ffviz import cli
     from pipeline.evaluation import synthetic
-    from pipeline.runtime import video_io
+    from pipeline.runtime import video_reader
 
     video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30, seed=3,
                                                          blurred_frames=()))
@@ -358,7 +358,7 @@ def test_cli_path_options_end_to_end(tmp_path, capsys):
                                      ["--mode", "crop", "--crop-scale", "0.9"])):  # crop mode's default path is l1
         out = tmp_path / f"out{index}.mp4"
         assert cli.main(["stabilize", str(source), "-o", str(out), "--no-deblur", *options]) == 0
-        assert video_io.probe_video(out).frame_count == 30
+        assert video_reader.probe_video(out).frame_count == 30
     for options, word in ((["--tripod", "--path", "l1"], "--tripod"),
                           (["--mode", "crop", "--path", "gaussian", "--crop-scale", "0.9"], "--crop-scale"),
                           (["--crop-scale", "0.9"], "--crop-scale")):

@@ -81,8 +81,8 @@ def _pair_of_videos(tmp_path, photo, n: int, output_from_input) -> tuple:
 # Reading
 
 
-def test_metrics_read_only_through_video_io():
-    # video_io applies the rotation tag and stands in for undecodable frames; reading PyAV directly
+def test_metrics_read_only_through_video_reader():
+    # video_reader applies the rotation tag and stands in for undecodable frames; reading PyAV directly
     # here would skip both (a tagged phone clip read sideways).
     source = Path(metrics.__file__).read_text()
     assert "import av" not in source and "av.open" not in source

@@ -12,7 +12,8 @@ from typing import Iterator
 import numpy as np
 import pytest
 
-from pipeline.runtime import parallel, video_io
+from pipeline.frames import Frame
+from pipeline.runtime import parallel
 from pipeline.evaluation import synthetic
 from pipeline.runtime.observer import StageCollector
 from pipeline.runtime.source import ArraySource, PrefetchedSource, one_pass
@@ -224,7 +225,7 @@ class WarningSource:
         self.closed_passes = 0
         self.passes = 0
 
-    def frames(self) -> Iterator[video_io.Frame]:
+    def frames(self) -> Iterator[Frame]:
         self.passes += 1
         try:
             for frame in self.inner.frames():

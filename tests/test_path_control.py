@@ -233,7 +233,7 @@ def test_the_recording_holds_each_setting_path_and_crop_and_the_figure_shows_the
 def test_cli_path_control_options_end_to_end(tmp_path, capsys):
     from ffviz import cli
     from pipeline.evaluation import synthetic
-    from pipeline.runtime import video_io
+    from pipeline.runtime import video_reader
 
     video = synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30, seed=3,
                                                          blurred_frames=(), moving_object=False))
@@ -243,7 +243,7 @@ def test_cli_path_control_options_end_to_end(tmp_path, capsys):
     assert cli.main(["stabilize", str(source), "-o", str(out), "--mode", "crop", "--crop", "adaptive", "--no-deblur",
                      "--smoothness", "t=80,z=20", "--max-shift", "10", "--max-angle", "1",
                      "--path-segment", "0-0.5:tripod", "--path-segment", "0.5-:l1:60"]) == 0
-    assert video_io.probe_video(out).frame_count == 30
+    assert video_reader.probe_video(out).frame_count == 30
     assert "on average" in capsys.readouterr().out
     for bad, words in ((["--smoothness", "t=120"], "between 0 and 100"), (["--path-segment", "5:l1"], "T0-T1:PATH"),
                        (["--path-segment", "0-5:tripod", "--path-segment", "4-:l1"], "overlap"),

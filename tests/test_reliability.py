@@ -34,7 +34,9 @@ import pytest
 from ffviz import cli
 from ffviz.bench import measured_argv, read_measurement
 from pipeline.evaluation import synthetic
-from pipeline.runtime import video_io
+from pipeline.frames import Frame
+from pipeline.runtime.video_info import VideoInfo
+from pipeline.runtime import video_reader, video_writer
 from tests.test_video_io import mux_sine
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -339,8 +341,8 @@ def temp_leftovers(folder: Path) -> list[str]:
     return [p.name for p in folder.iterdir() if "ffviz-tmp" in p.name]
 
 
-def decode(path: Path) -> tuple[video_io.VideoInfo, list[video_io.Frame]]:
-    with video_io.VideoReader(path) as reader:
+def decode(path: Path) -> tuple[VideoInfo, list[Frame]]:
+    with video_reader.VideoReader(path) as reader:
         return reader.info, list(reader)
 
 
@@ -396,7 +398,7 @@ def test_bad_input_matrix(name, process, tmp_path, capfd):
     # The output keeps what the reader makes of the input: frame count, timestamps, rate; upright size.
     info_in, frames_in = decode(source)
     info_out, frames_out = decode(output)
-    assert len(frames_out) == len(frames_in) == video_io.count_frames(output)
+    assert len(frames_out) == len(frames_in) == video_reader.count_frames(output)
     assert [f.time_s for f in frames_out] == pytest.approx([f.time_s for f in frames_in], abs=1e-6)
     steps = np.diff([f.time_s for f in frames_in])
     if len(steps) < 2 or np.ptp(steps) < 1e-6:  # a constant rate: the same rate
@@ -414,7 +416,7 @@ def test_bad_input_matrix(name, process, tmp_path, capfd):
 def test_the_corrupt_inputs_really_lose_a_frame_and_keep_its_slot(tmp_path):
     for name in ("corrupt frame mid-file (MJPEG, zeroed)", "corrupt frame mid-file (H.264, garbled)"):
         path = CASES[name].make(tmp_path)
-        with video_io.VideoReader(path) as reader:
+        with video_reader.VideoReader(path) as reader:
             frames = list(reader)
         assert [round(f.time_s * FPS) for f in frames] == list(range(12)), name
         assert np.array_equal(frames[5].rgb, frames[4].rgb), name  # the previous frame, repeated
@@ -425,7 +427,7 @@ def test_the_corrupt_inputs_really_lose_a_frame_and_keep_its_slot(tmp_path):
 def test_a_lost_first_frame_takes_the_first_good_one(tmp_path):
     source = write_video(tmp_path / "src.avi", photo_frames(6), codec="mjpeg", pix_fmt="yuvj420p")
     path = with_damaged_packet(source, tmp_path / "first.avi", 0, "zeroed")
-    with video_io.VideoReader(path) as reader:
+    with video_reader.VideoReader(path) as reader:
         frames = list(reader)
     assert [round(f.time_s * FPS) for f in frames] == list(range(6))
     assert np.array_equal(frames[0].rgb, frames[1].rgb)
@@ -435,10 +437,10 @@ def test_a_lost_first_frame_takes_the_first_good_one(tmp_path):
 
 def test_a_cut_in_the_middle_keeps_every_frame_before_the_cut(tmp_path):
     path = truncated(tmp_path, "faststart, two thirds in")
-    with video_io.VideoReader(path) as reader:
+    with video_reader.VideoReader(path) as reader:
         frames = list(reader)
     # 21 packets demuxed (the 21st cut off), frames in presentation order up to that point, original times.
-    assert len(frames) == 21 == video_io.count_frames(path)
+    assert len(frames) == 21 == video_reader.count_frames(path)
     assert [f.time_s for f in frames] == sorted(f.time_s for f in frames)
     truth = photo_frames(30)
     good = [f for f in frames if not any(f"{f.time_s:.3f} s" in w for w in reader.warnings)]
@@ -477,7 +479,7 @@ def test_existing_output_is_replaced_only_with_overwrite(clip, tmp_path):
     assert output.read_bytes() == b"an earlier result"
     result = run_cli("stabilize", str(clip), "-o", str(output), "--mode", "none", "--overwrite")
     assert result.returncode == 0, result.stderr
-    assert video_io.count_frames(output) == 12
+    assert video_reader.count_frames(output) == 12
     assert temp_leftovers(tmp_path) == []
 
 
@@ -571,7 +573,7 @@ def test_disk_full_while_writing_in_process(clip, tmp_path, monkeypatch, capsys,
         container = real_open(file, mode, **kwargs)
         return _FillsUp(container, room) if mode == "w" else container
 
-    monkeypatch.setattr(video_io.av, "open", open_filling_up)
+    monkeypatch.setattr(video_writer.av, "open", open_filling_up)
     output = tmp_path / "out.mp4"
     assert cli.main(["stabilize", str(clip), "-o", str(output), "--mode", "none"]) == 3
     err = capsys.readouterr().err.strip().splitlines()

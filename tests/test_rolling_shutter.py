@@ -211,7 +211,7 @@ def test_full_mode_completes_from_neighbours_corrected_alike(monkeypatch):
 def test_segment_run_plans_the_whole_runs_correction(tmp_path):
     """Segments join their inlier tracks, so the correction and every output transform are the whole run's."""
     from pipeline.evaluation.synthetic import write_video
-    from pipeline.runtime import segments
+    from pipeline import segments
     from pipeline.stabilize import stabilize
 
     path = tmp_path / "in.mp4"

@@ -20,7 +20,7 @@ from ffviz.recorder import RerunRecorder
 from ffviz.rrd import Recording
 from pipeline import geometry
 from pipeline.evaluation import synthetic
-from pipeline.runtime import video_io
+from pipeline.runtime import video_reader
 from pipeline.runtime.observer import Observers, StageCollector
 from pipeline.stabilize import StabilizeConfig, stabilize
 
@@ -37,8 +37,8 @@ def shaky(tmp_path_factory):
 
 
 def frame_stats(path):
-    info = video_io.probe_video(path)
-    with video_io.VideoReader(path) as reader:
+    info = video_reader.probe_video(path)
+    with video_reader.VideoReader(path) as reader:
         frames = [f.rgb for f in reader]
     return info, frames
 
@@ -48,7 +48,7 @@ def test_cli_stabilize_keeps_count_rate_size_and_fills_or_crops_borders(shaky, t
     path, video = shaky
     out = tmp_path / f"out_{mode}.mp4"
     assert cli.main(["stabilize", str(path), "-o", str(out), "--mode", mode]) == 0
-    info_in = video_io.probe_video(path)
+    info_in = video_reader.probe_video(path)
     info, frames = frame_stats(out)
     assert len(frames) == video.n_frames
     assert (info.width, info.height) == (info_in.width, info_in.height)
@@ -199,7 +199,7 @@ def test_stabilize_view_streams_live_and_also_saves_the_recording(shaky, tmp_pat
                 break
         assert any("still serving" in line for line in lines), lines
         assert _page_served(web, timeout_s=60)
-        assert video_io.count_frames(out) == len(video.frames)
+        assert video_reader.count_frames(out) == len(video.frames)
         recording = Recording.load(rrd)
         assert recording.indices(ent.OUTPUT_FRAME) == list(range(len(video.frames)))
     finally:
@@ -224,8 +224,8 @@ def test_real_clips_keep_frame_count_fps_size_and_audio(clip, mode, tmp_path):
     source = real_clip(clip)
     out = tmp_path / "out.mp4"
     assert cli.main(["stabilize", str(source), "-o", str(out), "--mode", mode]) == 0
-    info_in, info_out = video_io.probe_video(source), video_io.probe_video(out)
-    assert video_io.count_frames(out) == video_io.count_frames(source)
+    info_in, info_out = video_reader.probe_video(source), video_reader.probe_video(out)
+    assert video_reader.count_frames(out) == video_reader.count_frames(source)
     assert (info_out.width, info_out.height) == (info_in.width, info_in.height)
     assert abs(float(info_out.fps) - float(info_in.fps)) < 1e-3
     assert info_out.has_audio == info_in.has_audio

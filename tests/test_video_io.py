@@ -1,4 +1,5 @@
-"""pipeline.runtime.video_io: probing, counting, reading and writing, on small videos made here with PyAV."""
+"""pipeline.runtime's video I/O (video_reader, video_writer, audio, encoding): probing, counting, reading and writing,
+on small videos made here with PyAV."""
 
 from __future__ import annotations
 
@@ -14,16 +15,9 @@ import pytest
 
 from pipeline.evaluation import synthetic
 from pipeline.errors import ConfigError, InputError, OutputError
-from pipeline.runtime.video_io import (
-    Encoding,
-    VideoReader,
-    VideoWriter,
-    check_output_path,
-    count_frames,
-    probe_video,
-    x264_cpu_params,
-    x264_options,
-)
+from pipeline.runtime.encoding import Encoding, x264_cpu_params, x264_options
+from pipeline.runtime.video_reader import VideoReader, count_frames, probe_video
+from pipeline.runtime.video_writer import VideoWriter, check_output_path
 from tests.conftest import real_clip
 
 W, H, N, FPS = 64, 48, 10, 25
@@ -550,7 +544,8 @@ def test_undecodable_packet_is_replaced_by_the_previous_frame_with_a_warning(tmp
 
 
 def test_pipeline_io_does_not_import_viewers():
-    code = "import sys, pipeline.runtime.video_io; sys.exit(bool({'rerun', 'matplotlib'} & set(sys.modules)))"
+    code = ("import sys, pipeline.runtime.video_reader, pipeline.runtime.video_writer; "
+            "sys.exit(bool({'rerun', 'matplotlib'} & set(sys.modules)))")
     root = Path(__file__).resolve().parents[1]
     assert subprocess.run([sys.executable, "-c", code], cwd=root).returncode == 0
 

@@ -15,7 +15,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from pipeline.runtime.video_io import VideoReader  # noqa: E402
+from pipeline.runtime.video_reader import VideoReader  # noqa: E402
 
 FRAMES = (20, 55, 90)
 

@@ -18,7 +18,7 @@ import cv2
 
 from ffviz import cli
 from pipeline.evaluation import synthetic
-from pipeline.runtime.video_io import VideoReader
+from pipeline.runtime.video_reader import VideoReader
 
 SECONDS, FRAME = 4, 42
 OUT = Path(__file__).resolve().parent / "compare.jpg"

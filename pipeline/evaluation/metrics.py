@@ -17,7 +17,7 @@ of ours: residual jitter in pixels (one video) and the flicker of synthesized pi
 * Synthesized-pixel flicker (``synthesized_change``): mean |O_t - warp(O_{t-1})| over output pixels outside
   the input frame's mapped outline (a seam band excluded), divided by the same mean over real pixels.
 
-Invariants: both videos are read only through ``video_io.VideoReader`` (upright, rotation tags applied; an
+Invariants: both videos are read only through ``video_reader.VideoReader`` (upright, rotation tags applied; an
 undecodable frame stood in for by the previous one, so frame counts agree with the stabilizer's); a failed
 pair is left out of every mean, never counted as a value (NaN when all fail; ``to_dict`` writes None).
 Every definition in full, with where and why it departs from the script: docs/metrics.md.
@@ -35,7 +35,8 @@ import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from pipeline.runtime import video_io
+from pipeline.runtime.video_info import VideoInfo
+from pipeline.runtime import video_reader
 from pipeline.errors import ConfigError, InputError
 
 _MIN_INLIERS = 8
@@ -112,20 +113,20 @@ class StabilizationMetrics:
 
 
 # ----------------------------------------------------------------------------------------------
-# Reading: only through pipeline.runtime.video_io, so both videos are seen upright (the container's rotation
+# Reading: only through pipeline.runtime.video_reader, so both videos are seen upright (the container's rotation
 # tag applied) exactly as the stabilizer saw its input and wrote its output, and a frame that does not
 # decode is stood in for as in the stabilizer (frame count and timing kept). Read raw, a phone clip
 # tagged "rotate 90" is landscape while its upright output is portrait: the output was squeezed onto
 # the input's size and the distortion read about 0.56 instead of 0.99.
 
 
-def _fps(info: video_io.VideoInfo) -> float:
+def _fps(info: VideoInfo) -> float:
     """Frame rate for the jitter low-pass (sigma = fps / 2 frames)."""
     fps = float(info.fps)
     return fps if math.isfinite(fps) and fps > 0 else 30.0
 
 
-def _pictures(reader: video_io.VideoReader) -> Iterator[np.ndarray]:
+def _pictures(reader: video_reader.VideoReader) -> Iterator[np.ndarray]:
     """The reader's upright RGB frames, (H, W, 3) uint8, one at a time."""
     for frame in reader:
         yield frame.rgb
@@ -467,7 +468,7 @@ def video_motion_stats(path, config: MetricsConfig = MetricsConfig()) -> VideoMo
     pair_futures = []
     n = 0
     width = height = 0
-    with video_io.VideoReader(path) as reader, ThreadPoolExecutor(max_workers=2) as pool:
+    with video_reader.VideoReader(path) as reader, ThreadPoolExecutor(max_workers=2) as pool:
         fps = _fps(reader.info)
         pending = None  # detection of the previous frame
         last: _Features | None = None  # features of the frame before it
@@ -505,75 +506,39 @@ def compare(
     matches of frame t run while frame t+1 is decoded and detected; of the previous frame only its
     features and, for the flicker figure, its grey output frame and its labels are kept.
     ``progress(done, total)`` is called once per frame; total is the input's frame count from its
-    container (video_io.VideoInfo.frame_count: an estimate for MKV). Both videos are read upright
-    through video_io (see Reading). Raises InputError when a video cannot be read or the frame
+    container (VideoInfo.frame_count: an estimate for MKV). Both videos are read upright
+    through video_reader (see Reading). Raises InputError when a video cannot be read or the frame
     counts differ.
     """
     with ExitStack() as stack:
-        in_reader = stack.enter_context(video_io.VideoReader(input_path))
-        out_reader = stack.enter_context(video_io.VideoReader(output_path))
+        in_reader = stack.enter_context(video_reader.VideoReader(input_path))
+        out_reader = stack.enter_context(video_reader.VideoReader(output_path))
         return _compare(in_reader, out_reader, config, progress)
 
 
-def _compare(in_reader: video_io.VideoReader, out_reader: video_io.VideoReader, config: MetricsConfig,
+def _compare(in_reader: video_reader.VideoReader, out_reader: video_reader.VideoReader, config: MetricsConfig,
              progress: Callable[[int, int], None] | None) -> StabilizationMetrics:
-    fps_in, fps_out = _fps(in_reader.info), _fps(out_reader.info)
-    total = in_reader.info.frame_count  # the container's count (an estimate for MKV): for progress only
+    """compare's streaming pass: frame t's detections run while frame t - 1's matches are collected."""
     detectors = [_detector(config) for _ in range(2)]  # one per thread: a detector is not shared
     norm = detectors[0][1]
-
-    in_iter = _pictures(in_reader)
-    out_iter = _pictures(out_reader)
+    # the input's count from its container (an estimate for MKV): for progress only
+    tally = _Tally(config, in_reader.info.frame_count, progress)
     prev_in: _Features | None = None
     prev_out: _Features | None = None
-    in_pairs: list = []
-    out_pairs: list = []
-    crops: list[float] = []
-    dists: list[float] = []
-    blacks: list[float] = []
-    failed_io = 0
-    flicker = _FlickerTally(config)
     n = 0
-    done = 0
     width = height = 0
-
-    def collect(jobs, grey) -> None:
-        nonlocal failed_io, done
-        results = [j.result() for j in jobs]
-        H = results[0]
-        flicker.add(grey, H, results[1] if len(results) == 3 else None)
-        if H is None:
-            failed_io += 1
-        else:
-            crops.append(frame_cropping(H))
-            dists.append(frame_distortion(H))
-        if len(results) == 3:
-            out_pairs.append(results[1])
-            in_pairs.append(results[2])
-        done += 1
-        if progress is not None:
-            progress(done, total)
-
     with ThreadPoolExecutor(max_workers=2) as pool:
         pending = None  # match jobs of the previous frame
-        while True:
-            a = next(in_iter, None)
-            b = next(out_iter, None)
-            if a is None or b is None:
-                if a is None and b is None:
-                    break
-                n_in = n + (a is not None) + sum(1 for _ in in_iter)
-                n_out = n + (b is not None) + sum(1 for _ in out_iter)
-                raise InputError(f"frame counts differ: input has {n_in} frames, output has {n_out}")
+        for a, b in _frame_pairs(in_reader, out_reader):
             if n == 0:
                 height, width = a.shape[:2]
-            blacks.append(black_fraction(b, config.black_level))
+            tally.blacks.append(black_fraction(b, config.black_level))
             if b.shape[:2] != a.shape[:2]:
                 b = cv2.resize(b, (a.shape[1], a.shape[0]), interpolation=cv2.INTER_AREA)
             fut_a = pool.submit(_detect, a, detectors[0][0], config)
             fut_b = pool.submit(_detect, b, detectors[1][0], config)
             if pending is not None:
-                collect(*pending)
+                tally.collect(*pending)
             grey = cv2.cvtColor(b, cv2.COLOR_RGB2GRAY)
             fa, fb = fut_a.result(), fut_b.result()
             jobs = [pool.submit(_match, fa, fb, norm, config)]
@@ -584,28 +549,84 @@ def _compare(in_reader: video_io.VideoReader, out_reader: video_io.VideoReader, 
             prev_in, prev_out = fa, fb
             n += 1
         if pending is not None:
-            collect(*pending)
-
+            tally.collect(*pending)
     if n == 0:
         raise InputError(f"video {in_reader.info.path} has no frames")
-    out_stats = _motion_stats(out_pairs, width, height, fps_out, n)
-    in_stats = _motion_stats(in_pairs, width, height, fps_in, n)
-    nan = float("nan")
-    ratio, synth_change, real_change = flicker.result()
-    return StabilizationMetrics(
-        cropping_ratio=float(np.mean(crops)) if crops else nan,
-        distortion=float(np.min(dists)) if dists else nan,
-        distortion_mean=float(np.mean(dists)) if dists else nan,
-        black_fraction=float(np.mean(blacks)),
-        stability_translation=out_stats.stability_translation,
-        stability_rotation=out_stats.stability_rotation,
-        residual_jitter_px=out_stats.residual_jitter_px,
-        residual_jitter_deg=out_stats.residual_jitter_deg,
-        input=in_stats,
-        n_frames=n,
-        failed_pairs=failed_io + out_stats.failed_pairs,
-        synth_flicker_ratio=ratio,
-        synth_change_mean=synth_change,
-        real_change_mean=real_change,
-        synth_flicker_pairs=flicker.pairs,
-    )
+    return tally.metrics(n, width, height, _fps(in_reader.info), _fps(out_reader.info))
+
+
+def _frame_pairs(in_reader: video_reader.VideoReader,
+                 out_reader: video_reader.VideoReader) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """(input frame, output frame) in step; InputError, with both counts, when one video ends before the other."""
+    in_iter = _pictures(in_reader)
+    out_iter = _pictures(out_reader)
+    n = 0
+    while True:
+        a = next(in_iter, None)
+        b = next(out_iter, None)
+        if a is None or b is None:
+            if a is None and b is None:
+                return
+            n_in = n + (a is not None) + sum(1 for _ in in_iter)
+            n_out = n + (b is not None) + sum(1 for _ in out_iter)
+            raise InputError(f"frame counts differ: input has {n_in} frames, output has {n_out}")
+        yield a, b
+        n += 1
+
+
+class _Tally:
+    """What compare keeps of each frame once its matches are in: the pair transforms of both videos, the
+    per-frame cropping, distortion and black share, the synthesized-pixel flicker; ``progress`` is told each."""
+
+    def __init__(self, config: MetricsConfig, total: int, progress: Callable[[int, int], None] | None) -> None:
+        self.in_pairs: list = []
+        self.out_pairs: list = []
+        self.crops: list[float] = []
+        self.dists: list[float] = []
+        self.blacks: list[float] = []
+        self.failed_io = 0  # frames whose input -> output match failed
+        self.flicker = _FlickerTally(config)
+        self.done = 0
+        self._total, self._progress = total, progress
+
+    def collect(self, jobs: list, grey: np.ndarray) -> None:
+        """One frame's match jobs (input -> output, then output t-1 -> t and input t-1 -> t after the first frame)
+        and its grey output frame."""
+        results = [j.result() for j in jobs]
+        H = results[0]
+        self.flicker.add(grey, H, results[1] if len(results) == 3 else None)
+        if H is None:
+            self.failed_io += 1
+        else:
+            self.crops.append(frame_cropping(H))
+            self.dists.append(frame_distortion(H))
+        if len(results) == 3:
+            self.out_pairs.append(results[1])
+            self.in_pairs.append(results[2])
+        self.done += 1
+        if self._progress is not None:
+            self._progress(self.done, self._total)
+
+    def metrics(self, n: int, width: int, height: int, fps_in: float, fps_out: float) -> StabilizationMetrics:
+        """The measures over the ``n`` frames collected (of ``width`` x ``height``)."""
+        out_stats = _motion_stats(self.out_pairs, width, height, fps_out, n)
+        in_stats = _motion_stats(self.in_pairs, width, height, fps_in, n)
+        nan = float("nan")
+        ratio, synth_change, real_change = self.flicker.result()
+        return StabilizationMetrics(
+            cropping_ratio=float(np.mean(self.crops)) if self.crops else nan,
+            distortion=float(np.min(self.dists)) if self.dists else nan,
+            distortion_mean=float(np.mean(self.dists)) if self.dists else nan,
+            black_fraction=float(np.mean(self.blacks)),
+            stability_translation=out_stats.stability_translation,
+            stability_rotation=out_stats.stability_rotation,
+            residual_jitter_px=out_stats.residual_jitter_px,
+            residual_jitter_deg=out_stats.residual_jitter_deg,
+            input=in_stats,
+            n_frames=n,
+            failed_pairs=self.failed_io + out_stats.failed_pairs,
+            synth_flicker_ratio=ratio,
+            synth_change_mean=synth_change,
+            real_change_mean=real_change,
+            synth_flicker_pairs=self.flicker.pairs,
+        )

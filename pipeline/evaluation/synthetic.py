@@ -586,77 +586,30 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
     rng = np.random.default_rng(cfg.seed)
     fc = ((w - 1) / 2.0, (h - 1) / 2.0)
     t = np.arange(n, dtype=np.float64)
-    sec = t / fps
 
     # Intended path: steady pan + slow drift and roll; hand-held jitter on top.
     (drift_x, icy, ith), (jx, jy, jth, jzm) = _drift_and_jitter(cfg, rng, n, fps)
     icx = cfg.pan_px_per_frame * t + drift_x
     izm = np.ones(n)
-
-    # Object path parameters (drawn now so the random stream does not depend on later choices).
-    direction = 1.0 if rng.random() < 0.5 else -1.0
-    obj_y = rng.uniform(0.08, 0.2, size=2) * h * np.array([1.0, -1.0]) * (1 if rng.random() < 0.5 else -1)
-    obj_spin = math.radians(rng.uniform(-1.0, 1.0))  # per frame
-    obj_bob_phase = rng.uniform(0.0, 2.0 * math.pi)
-
-    def fw(cx, cy, th, zm):
-        return np.stack([_frame_from_world(cx[i], cy[i], th[i], zm[i], fc) for i in range(n)])
-
-    f_int = fw(icx, icy, ith, izm)
-    f_act = fw(icx + jx, icy + jy, ith + jth, izm * (1.0 + jzm))
+    object_draws = _object_draws(rng, h)
+    f_int = _frames_from_world(icx, icy, ith, izm, fc)
+    f_act = _frames_from_world(icx + jx, icy + jy, ith + jth, izm * (1.0 + jzm), fc)
 
     # World canvas: cover every actual and intended view.
     world, shift_x, shift_y = _world_canvas(cfg, f_act, f_int)
     icx = icx + shift_x
     icy = icy + shift_y
-    f_int = fw(icx, icy, ith, izm)
-    f_act = fw(icx + jx, icy + jy, ith + jth, izm * (1.0 + jzm))
+    f_int = _frames_from_world(icx, icy, ith, izm, fc)
+    f_act = _frames_from_world(icx + jx, icy + jy, ith + jth, izm * (1.0 + jzm), fc)
     _check_coverage(world.shape, f_act, w, h, "input")
     _check_coverage(world.shape, f_int, w, h, "intended")
 
-    # Moving object: its own straight path across the (linear part of the) intended view, plus a bob and spin.
-    obj_patch = obj_alpha = obj_pose = None
-    if cfg.moving_object and cfg.object_kind == "person":
-        obj_patch, obj_alpha = _person_texture(cfg)
-        obj_pose = _person_path(cfg, obj_alpha.shape, cfg.pan_px_per_frame * t + shift_x, shift_y)
-    elif cfg.moving_object:
-        obj_patch, obj_alpha = _object_texture(cfg.image)
-        half = (obj_alpha.shape[0] - 1) / 2.0
-        k = cfg.object_radius_px / _PATCH_RADIUS
-        frac = t / max(n - 1, 1)
-        base_x = cfg.pan_px_per_frame * t + shift_x
-        ox = base_x + direction * (-0.5 + frac) * cfg.object_sweep * w
-        oy = shift_y + obj_y[0] + (obj_y[1] - obj_y[0]) * frac + 0.04 * h * np.sin(2 * math.pi * 0.5 * sec + obj_bob_phase)
-        obj_pose = np.stack(
-            [
-                _translation(ox[i], oy[i]) @ _rotation(obj_spin * t[i]) @ _scaling(k) @ _translation(-half, -half)
-                for i in range(n)
-            ]
-        )
-
-    # Render.
+    obj_patch, obj_alpha, obj_pose = _moving_object(cfg, object_draws, shift_x, shift_y)
     blurred = default_blurred_frames(n) if cfg.blurred_frames is None else tuple(sorted(set(int(i) for i in cfg.blurred_frames)))
     kernel = motion_blur_kernel(cfg.blur_length_px, cfg.blur_angle_deg)
-    blurred_set = set(blurred)
-    canvas = world.copy()
-    frames, sharp_frames, masks = [], [], []
-    for i in range(n):
-        saved = None
-        if obj_pose is not None:
-            saved = _composite(canvas, obj_patch, obj_alpha, obj_pose[i])
-        if cfg.readout > 0:  # rows exposed one after another (the object stays at its pose of time i)
-            times = i + cfg.readout * np.arange(h) / h
-            jitter = np.stack([jx, jy, jth, jzm], axis=1)
-            sharp = _render_rows(canvas, _frames_from_world_at(np.stack([icx, icy, ith, izm], axis=1), jitter,
-                                                               times, cfg), w)
-        else:
-            sharp = cv2.warpAffine(canvas, f_act[i][:2], (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
-        if saved is not None:
-            y0, y1, x0, x1, region = saved
-            canvas[y0:y1, x0:x1] = region
-        sharp_frames.append(sharp)
-        frames.append(apply_blur(sharp, kernel) if i in blurred_set else sharp.copy())
-        masks.append(_object_mask(obj_alpha, f_act[i] @ obj_pose[i], w, h) if obj_pose is not None else np.zeros((h, w), bool))
+    intended, jitter = np.stack([icx, icy, ith, izm], axis=1), np.stack([jx, jy, jth, jzm], axis=1)
+    frames, sharp_frames, masks = _render(cfg, world, f_act, intended, jitter, (obj_patch, obj_alpha, obj_pose),
+                                          set(blurred), kernel)
 
     return SyntheticVideo(
         frames=frames,
@@ -669,12 +622,86 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
         blur_kernel=kernel,
         config=cfg,
         world=world,
-        intended_params=np.stack([icx, icy, ith, izm], axis=1),
-        jitter_params=np.stack([jx, jy, jth, jzm], axis=1),
+        intended_params=intended,
+        jitter_params=jitter,
         object_world_from_patch=obj_pose,
         object_patch=obj_patch,
         object_alpha=obj_alpha,
     )
+
+
+def _frames_from_world(cx: np.ndarray, cy: np.ndarray, th: np.ndarray, zm: np.ndarray,
+                       fc: tuple[float, float]) -> np.ndarray:
+    """(N, 3, 3) frame_from_world of the views centred on (cx, cy), rolled by th, zoomed by zm, per frame."""
+    return np.stack([_frame_from_world(cx[i], cy[i], th[i], zm[i], fc) for i in range(len(cx))])
+
+
+def _object_draws(rng: np.random.Generator, h: int) -> tuple[float, np.ndarray, float, float]:
+    """The disc's random path parameters, drawn from ``rng`` right after the camera's motion (so the random stream
+    does not depend on later choices): direction across the view (+-1), its heights at the start and the end
+    (px from the view's centre), its spin (radians a frame), its bob's phase."""
+    direction = 1.0 if rng.random() < 0.5 else -1.0
+    obj_y = rng.uniform(0.08, 0.2, size=2) * h * np.array([1.0, -1.0]) * (1 if rng.random() < 0.5 else -1)
+    obj_spin = math.radians(rng.uniform(-1.0, 1.0))  # per frame
+    obj_bob_phase = rng.uniform(0.0, 2.0 * math.pi)
+    return direction, obj_y, obj_spin, obj_bob_phase
+
+
+def _moving_object(cfg: SyntheticConfig, draws: tuple[float, np.ndarray, float, float], shift_x: float,
+                   shift_y: float) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """The moving object's (patch, alpha, world_from_patch per frame), all None without one: the person walks its
+    own path; the disc crosses the (linear part of the) intended view on a straight path, plus a bob and spin.
+    ``shift_x``, ``shift_y``: where the world canvas put the intended path's origin."""
+    if not cfg.moving_object:
+        return None, None, None
+    w, h, n, fps = int(cfg.width), int(cfg.height), int(cfg.n_frames), float(cfg.fps)
+    t = np.arange(n, dtype=np.float64)
+    if cfg.object_kind == "person":
+        patch, alpha = _person_texture(cfg)
+        return patch, alpha, _person_path(cfg, alpha.shape, cfg.pan_px_per_frame * t + shift_x, shift_y)
+    direction, obj_y, obj_spin, obj_bob_phase = draws
+    patch, alpha = _object_texture(cfg.image)
+    half = (alpha.shape[0] - 1) / 2.0
+    k = cfg.object_radius_px / _PATCH_RADIUS
+    frac = t / max(n - 1, 1)
+    base_x = cfg.pan_px_per_frame * t + shift_x
+    ox = base_x + direction * (-0.5 + frac) * cfg.object_sweep * w
+    oy = shift_y + obj_y[0] + (obj_y[1] - obj_y[0]) * frac + 0.04 * h * np.sin(2 * math.pi * 0.5 * (t / fps) + obj_bob_phase)
+    pose = np.stack(
+        [
+            _translation(ox[i], oy[i]) @ _rotation(obj_spin * t[i]) @ _scaling(k) @ _translation(-half, -half)
+            for i in range(n)
+        ]
+    )
+    return patch, alpha, pose
+
+
+def _render(cfg: SyntheticConfig, world: np.ndarray, f_act: np.ndarray, intended: np.ndarray, jitter: np.ndarray,
+            moving: tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None], blurred: set[int],
+            kernel: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """(frames, sharp frames, object masks): each frame of the world seen through ``f_act`` (row by row with a
+    rolling shutter, from the camera's ``intended`` and ``jitter`` parameters), the moving object composited at
+    its pose of the frame, frames in ``blurred`` blurred by ``kernel``."""
+    w, h, n = int(cfg.width), int(cfg.height), int(cfg.n_frames)
+    obj_patch, obj_alpha, obj_pose = moving
+    canvas = world.copy()
+    frames, sharp_frames, masks = [], [], []
+    for i in range(n):
+        saved = None
+        if obj_pose is not None:
+            saved = _composite(canvas, obj_patch, obj_alpha, obj_pose[i])
+        if cfg.readout > 0:  # rows exposed one after another (the object stays at its pose of time i)
+            times = i + cfg.readout * np.arange(h) / h
+            sharp = _render_rows(canvas, _frames_from_world_at(intended, jitter, times, cfg), w)
+        else:
+            sharp = cv2.warpAffine(canvas, f_act[i][:2], (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+        if saved is not None:
+            y0, y1, x0, x1, region = saved
+            canvas[y0:y1, x0:x1] = region
+        sharp_frames.append(sharp)
+        frames.append(apply_blur(sharp, kernel) if i in blurred else sharp.copy())
+        masks.append(_object_mask(obj_alpha, f_act[i] @ obj_pose[i], w, h) if obj_pose is not None else np.zeros((h, w), bool))
+    return frames, sharp_frames, masks
 
 
 def _drift_and_jitter(cfg: SyntheticConfig, rng: np.random.Generator, n: int, fps: float,
@@ -773,7 +800,7 @@ def write_video(
     ``crf`` (0 = lossless in YUV), x264's ``preset`` (None: its default), the config fps."""
     import av
 
-    from pipeline.runtime.video_io import x264_options
+    from pipeline.runtime.encoding import x264_options
 
     if isinstance(video, SyntheticVideo):
         frames: Iterable[np.ndarray] = video.sharp_frames if sharp else video.frames

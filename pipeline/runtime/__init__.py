@@ -1,1 +1,1 @@
-"""Running the chain over a video: decoding and encoding, frame sources, windows, segments and threads, observers."""
+"""Running the chain over a video: reading and writing, frame sources, the sliding window, threads, memory, observers."""

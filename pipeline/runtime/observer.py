@@ -21,7 +21,7 @@ __all__ = ["Stamp", "Observer", "NullObserver", "Observers", "StageCollector", "
 
 class Observer(Protocol):
     def on_start(self, info: Any, config: Any) -> None:
-        """``info``: the input's video_io.VideoInfo; ``config``: the run's StabilizeConfig."""
+        """``info``: the input's VideoInfo; ``config``: the run's StabilizeConfig."""
 
     def on_motion(self, stamp: Stamp, estimate: MotionEstimate) -> None:
         """Pass 1's estimate for the pair (frame - 1, frame)."""

@@ -12,14 +12,16 @@ from typing import Iterator, Protocol, Sequence
 
 import numpy as np
 
-from pipeline.runtime import parallel, video_io
+from pipeline.frames import Frame
+from pipeline.runtime.video_info import VideoInfo
+from pipeline.runtime import parallel, video_reader
 from pipeline.errors import InputError
 
 
 class FrameSource(Protocol):
-    info: video_io.VideoInfo
+    info: VideoInfo
 
-    def frames(self) -> Iterator[video_io.Frame]:
+    def frames(self) -> Iterator[Frame]:
         """A new pass over every frame; closing the iterator releases what it holds."""
 
     def drain_warnings(self) -> list[str]:
@@ -27,21 +29,21 @@ class FrameSource(Protocol):
 
 
 class FileSource:
-    """A video file's frames; ``start_s``/``end_s``: only that part of it (seconds; see video_io.VideoReader), and
+    """A video file's frames; ``start_s``/``end_s``: only that part of it (seconds; see video_reader.VideoReader), and
     ``info.clip`` says so, so the output and its audio start at the first frame read (a preview)."""
 
     def __init__(self, path: Path | str, *, start_s: float | None = None, end_s: float | None = None) -> None:
         self.path = Path(path)
-        self.info = video_io.probe_video(self.path)
+        self.info = video_reader.probe_video(self.path)
         self._range = (start_s, end_s)
         if start_s is not None or end_s is not None:
-            self.info = video_io.clipped_info(self.info, start_s, end_s)
+            self.info = video_reader.clipped_info(self.info, start_s, end_s)
         self._warnings: list[str] = []
-        self._reader: video_io.VideoReader | None = None
+        self._reader: video_reader.VideoReader | None = None
 
-    def frames(self) -> Iterator[video_io.Frame]:
+    def frames(self) -> Iterator[Frame]:
         start_s, end_s = self._range
-        with video_io.VideoReader(self.path, keep_depth=True, start_s=start_s, end_s=end_s) as reader:
+        with video_reader.VideoReader(self.path, keep_depth=True, start_s=start_s, end_s=end_s) as reader:
             self._reader = reader
             try:
                 yield from reader
@@ -67,13 +69,13 @@ class ArraySource:
         self._frames = frames
         height, width = frames[0].shape[:2]
         rate = Fraction(fps).limit_denominator(1001)
-        self.info = video_io.VideoInfo(path=Path(name), width=width, height=height, fps=rate,
+        self.info = VideoInfo(path=Path(name), width=width, height=height, fps=rate,
                                        frame_count=len(frames), duration_s=len(frames) / float(rate), rotation=0,
                                        has_audio=False, codec="raw", time_base=1 / rate)
 
-    def frames(self) -> Iterator[video_io.Frame]:
+    def frames(self) -> Iterator[Frame]:
         for index, rgb in enumerate(self._frames):
-            yield video_io.Frame(index=index, pts=index, time_s=index / float(self.info.fps), rgb=rgb)
+            yield Frame(index=index, pts=index, time_s=index / float(self.info.fps), rgb=rgb)
 
     def drain_warnings(self) -> list[str]:
         return []
@@ -92,8 +94,8 @@ class PrefetchedSource:
         self.depth = depth
         self._warnings: list[str] = []
 
-    def frames(self) -> Iterator[video_io.Frame]:
-        def decoded() -> Iterator[tuple[video_io.Frame | None, list[str]]]:
+    def frames(self) -> Iterator[Frame]:
+        def decoded() -> Iterator[tuple[Frame | None, list[str]]]:
             with one_pass(self.source) as frames:
                 for frame in frames:
                     yield frame, self.source.drain_warnings()
@@ -114,7 +116,7 @@ class PrefetchedSource:
 
 
 @contextmanager
-def one_pass(source: FrameSource) -> Iterator[Iterator[video_io.Frame]]:
+def one_pass(source: FrameSource) -> Iterator[Iterator[Frame]]:
     """A pass over the source that is closed however the loop ends."""
     frames = source.frames()
     try:

@@ -5,13 +5,11 @@ Only 2 * radius + 1 decoded frames are held at any time, whatever the video's le
 
 from __future__ import annotations
 
-import threading
 from collections import deque
 from dataclasses import dataclass
-from typing import Callable, Generic, Iterable, Iterator, TypeVar
+from typing import Generic, Iterable, Iterator, TypeVar
 
 T = TypeVar("T")
-D = TypeVar("D")
 
 
 @dataclass(frozen=True)
@@ -48,30 +46,6 @@ def sliding_window(items: Iterable[T], radius: int) -> Iterator[Windowed[T]]:
             first += 1
 
 
-# PerFrame caches keep this many frames beyond a frame's window before forgetting them: frames are rendered a
-# little out of order on several threads.
+# Per-frame caches (pipeline/stages/per_frame.py) keep this many frames beyond a frame's window before forgetting
+# them: frames are rendered a little out of order on several threads.
 RENDER_SLACK_FRAMES = 8
-
-
-class PerFrame(Generic[T, D]):
-    """What ``make`` derives from a frame, by frame index, made once while the frame is in the window (every
-    frame it is a neighbour of reuses it). Thread-safe: frames are rendered on several threads."""
-
-    def __init__(self, make: Callable[[T], D]) -> None:
-        self._make = make
-        self._by_frame: dict[int, D] = {}
-        self._lock = threading.Lock()
-
-    def get(self, index: int, frame: T) -> D:
-        with self._lock:
-            derived = self._by_frame.get(index)
-        if derived is None:  # two threads may both make it: the same result, no harm
-            derived = self._make(frame)
-            with self._lock:
-                self._by_frame[index] = derived
-        return derived
-
-    def forget_before(self, index: int) -> None:
-        with self._lock:
-            for old in [i for i in self._by_frame if i < index]:
-                del self._by_frame[old]

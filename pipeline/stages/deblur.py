@@ -38,7 +38,7 @@ from pipeline.stages import warping
 from pipeline.errors import ConfigError
 from pipeline.stages.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbours
 from pipeline.imaging import INTENSITY_WEIGHTS, intensity
-from pipeline.runtime.window import RENDER_SLACK_FRAMES, PerFrame
+from pipeline.stages.per_frame import PerFrame
 
 # Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
 # and scale with the frame height (blur, in pixels, grows with the resolution).
@@ -412,12 +412,11 @@ def deblur_frame(output: np.ndarray, output_valid: np.ndarray | None, t: int, fr
     ``output``: frame t in the output's view (``orig_from_view`` maps it to frame t's original pixels);
     ``output_valid``: its pixels with content (None: all); ``frames``: original frames by index, t included
     (those beyond ``config.neighbour_frames`` are ignored); ``warped``: neighbours in that view the caller already has
-    (completion's; reused, not made again). Blurriness is measured on the original frames; only the sharper
+    (completion's; reused, not made again); ``cache``: gradient-energy maps the caller keeps across frames (it
+    forgets those no later frame needs). Blurriness is measured on the original frames; only the sharper
     neighbours are warped.
     """
     frames = {i: rgb for i, rgb in frames.items() if abs(i - t) <= config.neighbour_frames}
-    if cache is not None:
-        cache.forget_before(t - config.neighbour_frames - RENDER_SLACK_FRAMES)
     measured = window_blurriness(frames, t, curr_from_prev, cache=cache)
     sharper = {o for o, ratio in measured.ratios.items() if ratio > config.min_ratio}
     neighbours = [n for n in warped if n.offset in sharper]

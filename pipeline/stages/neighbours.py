@@ -22,7 +22,7 @@ from numba import njit
 
 from pipeline import geometry
 from pipeline.stages import warping
-from pipeline.runtime.window import PerFrame
+from pipeline.stages.per_frame import PerFrame
 
 _MAP_COLUMNS = 4096
 TAP_SLACK = 1.0 / 64  # OpenCV's bilinear weights are 1/32 steps: a tap within this of the edge weighs nothing

@@ -24,7 +24,8 @@ from pipeline import stabilize as stab
 from pipeline.chain import render_frames
 from pipeline.errors import ConfigError, InputError
 from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
-from pipeline.runtime import video_io
+from pipeline.runtime.encoding import Encoding
+from pipeline.runtime import video_reader, video_writer
 from pipeline.runtime.observer import NullObserver, Observer, null_progress
 from pipeline.runtime.source import FileSource
 
@@ -73,7 +74,7 @@ def render_segment(path: Path, config: stab.StabilizeConfig, frames: range, plan
 
 def run(input_path: Path | str, output_path: Path | str | None, config: stab.StabilizeConfig = stab.StabilizeConfig(),
         *, segment_frames: int, mapper: Mapper = serial_map, observer: Observer | None = None,
-        overwrite: bool = False, encoding: video_io.Encoding = video_io.Encoding(),
+        overwrite: bool = False, encoding: Encoding = Encoding(),
         on_segment: Callable[[int, int], None] | None = None,
         ) -> stab.StabilizeReport:
     """Stabilize one video segment by segment (``mapper`` decides where the segments run), through the same
@@ -86,12 +87,12 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
     input_path = Path(input_path)
     output_path = Path(output_path) if output_path is not None else None
     observer = observer or NullObserver()
-    info = video_io.probe_video(input_path)
+    info = video_reader.probe_video(input_path)
     if output_path is not None:
-        video_io.check_output_path(output_path, input_path, overwrite=overwrite)
+        video_writer.check_output_path(output_path, input_path, overwrite=overwrite)
 
     def motion_pass() -> MotionPass:
-        ranges = plan(video_io.count_frames(input_path), segment_frames)
+        ranges = plan(video_reader.count_frames(input_path), segment_frames)
         joined = join_motion(mapper(motion_segment, [(input_path, config, r) for r in ranges]))
         for frame, message in joined.warnings:
             observer.on_warning(None if frame is None else Stamp(frame, joined.times_s[frame]), message)
