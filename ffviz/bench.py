@@ -368,16 +368,18 @@ def _profile(clips: Sequence[Path], modes: Sequence[str]) -> int:
 
     if set(modes) & set(L1_MODES):
         raise ConfigError("--profile measures each mode's default path: leave out " + ", ".join(L1_MODES))
-    rows = []
+    profiles = []
     for clip in clips:
         for mode in modes:
             base, _, codec = mode.partition("-")
             profile = bench_profile.profile_stages(clip, base, codec=codec or "auto")
             profile.mode = mode
-            rows.append(profile.line())
+            profiles.append(profile)
     print("CPU ms a frame by stage (one worker, in process; total: the run without recording, every thread)")
     print(bench_profile.table_header())
-    print("\n".join(rows), flush=True)
+    print("\n".join(profile.line() for profile in profiles), flush=True)
+    print("\nThe recording's CPU ms a frame by entity family (`--rrd`, full level, at the default --record-size)")
+    print(bench_profile.recording_table(profiles), flush=True)
     return 0
 
 

@@ -4,13 +4,16 @@ Each clip and mode runs in this process on one worker (every stage on the callin
 OpenCV's own threads off, under cProfile timed by this thread's CPU clock. A stage's CPU is the cumulative time
 of the functions that make it up (both passes); the chain's own per-stage CPU (FrameResult.cpu_seconds) gives warp,
 completion and deblurring. The encoder's threads are the process's CPU beyond this thread's, added to encode.
-Recording is a second run with a full recording (.rrd): its extra CPU over the first. A short synthetic run comes
+Recording is a second run with a full recording (.rrd): its extra CPU over the first, and by entity family what the
+recorder counted (its digests on the rendering thread, its own thread's encoding and logging); the rest of the extra
+is the SDK's threads (batching, compression, writing) and what the run does differently. A short synthetic run comes
 first, so that imports and numba's compilation stay out of the figures.
 """
 
 from __future__ import annotations
 
 import cProfile
+import functools
 import pstats
 import resource
 import tempfile
@@ -51,6 +54,7 @@ class StageProfile:
     frames: int
     cpu_ms: dict[str, float] = field(default_factory=dict)  # stage -> CPU ms a frame
     total_cpu_s: float = 0.0  # the run without recording, every thread
+    recording_ms: dict[str, float] = field(default_factory=dict)  # entity family -> the recorder's CPU ms a frame
 
     def line(self) -> str:
         return (f"| {self.clip} | {self.mode} | " + " | ".join(f"{self.cpu_ms.get(s, 0.0):.1f}" for s in STAGES)
@@ -59,6 +63,24 @@ class StageProfile:
 
 def table_header() -> str:
     return ("| clip | mode | " + " | ".join(STAGES) + " | total |\n|---|---|" + "---|" * (len(STAGES) + 1))
+
+
+def recording_table(profiles: list[StageProfile]) -> str:
+    """The recording's CPU ms a frame by entity family (costliest first), and the rest of its extra CPU."""
+    totals: dict[str, float] = {}
+    for profile in profiles:
+        for name, ms in profile.recording_ms.items():
+            totals[name] = totals.get(name, 0.0) + ms
+    families = sorted(totals, key=totals.get, reverse=True)
+    lines = ["| clip | mode | recording | " + " | ".join(families) + " | SDK threads and the rest |",
+             "|---|---|---|" + "---|" * (len(families) + 1)]
+    for profile in profiles:
+        counted = sum(profile.recording_ms.values())
+        total = profile.cpu_ms.get("recording", 0.0)
+        lines.append(f"| {profile.clip} | {profile.mode} | {total:.1f} | "
+                     + " | ".join(f"{profile.recording_ms.get(name, 0.0):.1f}" for name in families)
+                     + f" | {max(total - counted, 0.0):.1f} |")
+    return "\n".join(lines)
 
 
 class _StageTimes(NullObserver):
@@ -83,30 +105,32 @@ def _cumulative(stats: pstats.Stats, functions: tuple) -> float:
 
 
 def _run(clip: Path, mode: str, workdir: Path, record: bool, codec: str):
+    """(profile of this thread, stage times, process CPU s, this thread's CPU s, the recorder or None). A recorded
+    run is not profiled: its digests run on this thread, and the profiler's cost would count as the recording's."""
     from pipeline.config import StabilizeConfig
     from pipeline.runtime.encoding import Encoding
     from pipeline.runtime import video_reader, video_writer
     from pipeline.runtime.observer import Observers
     from pipeline.stabilize import stabilize
 
-    observers = []
+    recorder = None
     if record:
         from ffviz.recorder import RerunRecorder
 
-        observers.append(RerunRecorder(workdir / f"{mode}.rrd", level="full", jpeg_quality=80))
+        recorder = RerunRecorder(workdir / f"{mode}.rrd", level="full", jpeg_quality=80)
     times = _StageTimes()
     profile = cProfile.Profile(time.thread_time)
+    run = stabilize if record else functools.partial(profile.runcall, stabilize)
     threads_before = cv2.getNumThreads()
     cv2.setNumThreads(0)  # OpenCV's work on the calling thread, where it is attributed
     cpu_before, thread_before = _process_cpu(), time.thread_time()
     try:
-        profile.runcall(stabilize, clip, workdir / f"{mode}.mp4", StabilizeConfig(mode=mode),
-                        observer=Observers(*observers, times), overwrite=True, encoding=Encoding(codec=codec),
-                        workers=1)
+        run(clip, workdir / f"{mode}.mp4", StabilizeConfig(mode=mode), observer=Observers(recorder, times),
+            overwrite=True, encoding=Encoding(codec=codec), workers=1)
     finally:
         cv2.setNumThreads(threads_before)
     process_cpu, thread_cpu = _process_cpu() - cpu_before, time.thread_time() - thread_before
-    return pstats.Stats(profile), times, process_cpu, thread_cpu
+    return None if record else pstats.Stats(profile), times, process_cpu, thread_cpu, recorder
 
 
 def _warm_up(mode: str, workdir: Path, codec: str) -> None:
@@ -123,8 +147,9 @@ def profile_stages(clip: Path, mode: str, *, recording: bool = True, codec: str 
     """CPU ms a frame for each of STAGES on ``clip`` in ``mode``, the output written with ``codec``."""
     with tempfile.TemporaryDirectory() as tmp:
         _warm_up(mode, Path(tmp), codec)
-        stats, times, process_cpu, thread_cpu = _run(clip, mode, Path(tmp), False, codec)
-        recorded_cpu = _run(clip, mode, Path(tmp), True, codec)[2] if recording else process_cpu
+        stats, times, process_cpu, thread_cpu, _ = _run(clip, mode, Path(tmp), False, codec)
+        recorded = _run(clip, mode, Path(tmp), True, codec) if recording else None
+    recorded_cpu = recorded[2] if recorded is not None else process_cpu
     frames = max(times.frames, 1)
     seconds = {stage: _cumulative(stats, functions) for stage, functions in _functions().items()}
     seconds["encode"] += max(process_cpu - thread_cpu, 0.0)  # the encoder's own threads
@@ -134,5 +159,7 @@ def profile_stages(clip: Path, mode: str, *, recording: bool = True, codec: str 
     seconds["local warp"] = max(completion - seconds["mosaic"] - seconds["flow"] - seconds["FMM"], 0.0)
     seconds["recording"] = max(recorded_cpu - process_cpu, 0.0) if recording else 0.0
     seconds["other"] = max(process_cpu - sum(v for k, v in seconds.items() if k != "recording"), 0.0)
+    families = recorded[4].cpu_by_family if recorded is not None else {}
     return StageProfile(clip.name, mode, times.frames,
-                        {stage: 1000 * seconds.get(stage, 0.0) / frames for stage in STAGES}, process_cpu)
+                        {stage: 1000 * seconds.get(stage, 0.0) / frames for stage in STAGES}, process_cpu,
+                        {name: 1000 * cpu / frames for name, cpu in families.items()})

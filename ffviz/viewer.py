@@ -101,6 +101,10 @@ def serve(path: Path, *, web_port: int = 9090, grpc_port: int = 9876, native: bo
         stop_process_group(process)
 
 
+# What the live view's server keeps for the page: past it, the oldest is dropped (display only; the .rrd has all).
+LIVE_SERVER_MEMORY = "1GiB"
+
+
 class LiveViewer:
     """A web viewer with no recording yet, serving on 127.0.0.1, for a run to stream into (`--view`).
 
@@ -109,7 +113,7 @@ class LiveViewer:
 
     def __init__(self, *, web_port: int = 9090, grpc_port: int = 9876) -> None:
         command = [rerun_executable(), "--web-viewer", "--bind", "127.0.0.1", "--web-viewer-port", str(web_port),
-                   "--port", str(grpc_port)]
+                   "--port", str(grpc_port), "--server-memory-limit", LIVE_SERVER_MEMORY]
         env = dict(os.environ)
         env.setdefault("RERUN_ANALYTICS", "0")
         self.process = subprocess.Popen(command, env=env, start_new_session=True, stdout=subprocess.DEVNULL,

@@ -25,3 +25,21 @@ def shared_videos() -> Path:
     if not SHARED_VIDEOS.is_dir():
         pytest.skip(f"{SHARED_VIDEOS} not present")
     return SHARED_VIDEOS
+
+
+@pytest.fixture(scope="session")
+def uhd_recording(tmp_path_factory):
+    """A short 3840x2160 synthetic clip stabilized in full mode and recorded at the default size (frame 4 traced):
+    (the .rrd, the recorder). Shared by the recording-size and the browser tests."""
+    from ffviz.recorder import RerunRecorder
+    from pipeline.evaluation import synthetic
+    from pipeline.stabilize import StabilizeConfig, stabilize
+
+    folder = tmp_path_factory.mktemp("uhd")
+    clip = folder / "uhd.mp4"
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=3840, height=2160, n_frames=8, seed=3)),
+                          clip)
+    rrd = folder / "uhd.rrd"
+    recorder = RerunRecorder(rrd, trace_frames=[4])
+    stabilize(clip, None, StabilizeConfig(), observer=recorder)
+    return rrd, recorder

@@ -273,7 +273,8 @@ def test_profile_attributes_the_cpu_to_every_stage_of_full_mode(tiny_clip, capsy
     from ffviz.bench_profile import STAGES
 
     assert main(["bench", str(tiny_clip), "--profile", "--modes", "full"]) == 0
-    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| tiny.mp4 | full |")]
+    stage_table, _, recording_table = capsys.readouterr().out.partition("by entity family")
+    rows = [line for line in stage_table.splitlines() if line.startswith("| tiny.mp4 | full |")]
     assert len(rows) == 1
     cells = [float(c) for c in rows[0].strip("|").split("|")[2:]]
     by_stage, total = dict(zip(STAGES, cells)), cells[-1]
@@ -283,6 +284,14 @@ def test_profile_attributes_the_cpu_to_every_stage_of_full_mode(tiny_clip, capsy
         assert by_stage[stage] > 0, stage
     # the stages of the run without recording add up to its measured CPU, with what no stage claims as 'other'
     assert sum(by_stage[s] for s in STAGES if s != "recording") == pytest.approx(total, rel=0.02, abs=0.3)
+    # the recording's cost by entity family: every frame-sized family counted
+    lines = recording_table.splitlines()
+    header = next(line for line in lines if line.startswith("| clip |")).strip("|").split("|")
+    row = next(line for line in lines if line.startswith("| tiny.mp4 | full |")).strip("|").split("|")
+    by_family = {name.strip(): float(cell) for name, cell in zip(header[2:], row[2:])}
+    for family in ("input/frame", "stabilized/frame", "stabilized/missing", "completion/frame", "completion/mosaic",
+                   "completion/fmm", "completion/source", "output/frame"):
+        assert by_family[family] > 0, family
 
 
 def test_l1_modes_run_the_l1_path_and_the_profile_refuses_them(tmp_path):

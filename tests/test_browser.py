@@ -360,6 +360,29 @@ def test_a_real_full_recording_opens_on_frame_0_and_steps_to_the_last(real_recor
             f"{tmp_path}/last.png")
 
 
+def test_a_4k_recording_opens_on_frame_0_in_the_browser(uhd_recording, tmp_path):
+    """Recorded at the viewing size, a 3840x2160 clip's recording opens in the web viewer on frame 0."""
+    from ffviz import entities as ent
+    from ffviz.rrd import Recording
+
+    rrd, recorder = uhd_recording
+    recording = Recording.load(rrd)
+    first, last = recording.image(ent.INPUT_FRAME, 0), recording.image(ent.INPUT_FRAME, 7)
+    assert first.shape[:2] == (recorder.view.height, recorder.view.width) == (540, 960)
+    with web_viewer_page(rrd, tmp_path / "profile") as (devtools, url, navigated):
+        deadline = navigated + OPEN_TIMEOUT_S
+        scores = []
+        while True:
+            time.sleep(5)
+            shot = screenshot(devtools)
+            scores.append(round(match_score(shot, first), 3))
+            if scores[-1] >= MATCH_SCORE or time.monotonic() > deadline:
+                break
+        cv2.imwrite(str(tmp_path / "open.png"), cv2.cvtColor(shot, cv2.COLOR_RGB2BGR))
+        assert scores[-1] >= MATCH_SCORE, f"frame 0 not on screen (scores: {scores}); {tmp_path}/open.png"
+        assert match_score(shot, first) > match_score(shot, last) - 0.05  # frame 0, not a later one
+
+
 # -- ffviz snapshot: the native viewer, headless ----------------------------------------------------------------
 
 def vulkan_drivers() -> list[str]:

@@ -116,21 +116,9 @@ def test_a_recording_with_a_slow_writer_holds_at_most_its_budget(tmp_path, monke
     assert len(Recording.load(tmp_path / "slow.rrd").indices(ent.OUTPUT_FRAME)) == 24
 
 
-@pytest.fixture(scope="module")
-def uhd_recording(tmp_path_factory):
-    """A short 3840x2160 clip recorded at the default size."""
-    folder = tmp_path_factory.mktemp("uhd")
-    clip = folder / "uhd.mp4"
-    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=3840, height=2160, n_frames=8, seed=3)),
-                          clip)
-    rrd = folder / "uhd.rrd"
-    recorder = RerunRecorder(rrd, trace_frames=[4])
-    stabilize(clip, None, StabilizeConfig(), observer=recorder)
-    return Recording.load(rrd), recorder
-
-
 def test_a_4k_recording_holds_its_pictures_at_the_recorded_size(uhd_recording):
-    recording, recorder = uhd_recording
+    rrd, recorder = uhd_recording
+    recording = Recording.load(rrd)
     assert recording.size(ent.SIZES, "input_size") == (3840, 2160)
     assert recording.size(ent.SIZES, "recorded_size") == (960, 540) == (recorder.view.width, recorder.view.height)
     for entity in (ent.INPUT_FRAME, ent.OUTPUT_FRAME, ent.COMPLETION_FRAME):
@@ -142,7 +130,7 @@ def test_a_4k_recording_holds_its_pictures_at_the_recorded_size(uhd_recording):
 
 
 def test_a_4k_recordings_classes_are_the_pipelines_and_its_statistics_full_resolution(uhd_recording):
-    recording, _ = uhd_recording
+    recording = Recording.load(uhd_recording[0])
     legend_classes = set(recording.annotation_colours(ent.COMPLETION_SOURCE).values())
     for t in recording.indices(ent.COMPLETION_SOURCE):
         classes = recording.image(ent.COMPLETION_SOURCE, t)

@@ -12,7 +12,7 @@ import threading
 from collections import deque
 from typing import Any, Callable
 
-BUDGET_BYTES = 256 << 20  # a few seconds of frames at the recorded size: the writer's jitter absorbed, no more
+BUDGET_BYTES = 128 << 20  # a dozen or more frames at the recorded size: the writer's jitter absorbed, no more
 
 
 class Backlog:

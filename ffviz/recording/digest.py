@@ -14,6 +14,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Iterator, Sequence
 
+import cv2
 import numpy as np
 import rerun as rr
 
@@ -217,7 +218,7 @@ def _completion(b: _Builder, result: CompletionResult) -> None:
         _trace_completion(b, result)
     with b.timed(ent.COMPLETION_STATS):
         area = result.missing.size
-        counts = np.bincount(result.source.ravel(), minlength=len(SOURCE_NAMES))
+        counts = class_counts(result.source)
         b.scalar(f"{ent.COMPLETION_STATS}/missing", np.count_nonzero(result.missing) / area)
         for code, name in enumerate(SOURCE_NAMES[1:], start=1):
             b.scalar(f"{ent.COMPLETION_STATS}/{name.replace(' ', '_')}", counts[code] / area)
@@ -238,6 +239,11 @@ def _completion(b: _Builder, result: CompletionResult) -> None:
     else:  # no stale map from an earlier frame (nor its values)
         b.clear(ent.COMPLETION_FLOW_IMAGE, ent.COMPLETION_FLOW_ARROWS)
         b.clear(ent.COMPLETION_FMM_ORDER, ent.COMPLETION_FMM_ARRIVAL, recursive=True)
+
+
+def class_counts(classes: np.ndarray) -> np.ndarray:
+    """(256,) pixels of each class of a uint8 class map (OpenCV's histogram: a tenth of np.bincount's time)."""
+    return cv2.calcHist([np.ascontiguousarray(classes, np.uint8)], [0], None, [256], [0, 256]).ravel().astype(np.int64)
 
 
 def filled_by_classes(result: CompletionResult) -> np.ndarray:
