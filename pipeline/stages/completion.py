@@ -33,10 +33,10 @@ from pipeline.stages.candidates import (AsIs, Candidate, CandidateSource, Carrie
 from pipeline.stages.local_warp import FlowPiece, FlowSettings, NeighbourFill  # noqa: F401 (results name them here)
 from pipeline.stages.neighbours import WarpedNeighbour, remap_points, shrink, shrink_all
 
-# What filled each pixel (CompletionResult.source): the first four are steps of the chain or no step at all, the
-# others candidate kinds (their names are the ones CompletionConfig.candidates lists). Three kinds take each pixel's
-# value from one neighbour (CompletionResult.filled_by names it): its local warp (eq. 25), its moving content carried
-# on by a frame, or its sample as it is (no local motion). The majority is the median of several neighbours'.
+# What filled each pixel (CompletionResult.source): "original" (not missing), "mosaic" (step 1), "fallback" (step 3),
+# and the kinds of candidate that win step 2's contest, by the names CompletionConfig.candidates lists. Three kinds
+# take a pixel's value from one neighbour (CompletionResult.filled_by names it): its local warp (eq. 25), its moving
+# content carried on by a frame, its sample as it is (no local motion); the majority is several neighbours' median.
 SOURCE_ORIGINAL, SOURCE_MOSAIC, SOURCE_LOCAL_WARP, SOURCE_FALLBACK, SOURCE_CARRIED_ON, SOURCE_AS_IS = 0, 1, 2, 3, 4, 5
 SOURCE_MAJORITY = 6
 SOURCE_NAMES = ("original", "mosaic", "local warp", "fallback", "carried on", "neighbour as is", "majority")
@@ -67,7 +67,7 @@ class CompletionConfig:
     # "mosaic" and "carried on" (pipeline/presets.py).
     candidates: tuple[str, ...] = ("mosaic", "local warp", "neighbour as is", "majority", "carried on")
     max_warp_neighbours: int = 4  # neighbours: local flows are computed for this many, by priority
-    residual_radius: int = 4  # px: a local alignment error is the mean over (2r+1)^2 known pixels
+    residual_radius: int = 4  # px: a local alignment error averages the known pixels within r of the nearest one
     moving_px: float = 2.0  # px: a candidate sampled through a longer flow shows moving content
     # A moving candidate replaces a doubtful mosaic pixel when its error is under the static scene's by more than
     # mosaic_check_margin (intensity) and under mosaic_check_ratio (a share, in (0, 1]; 1: the margin alone) of it:
