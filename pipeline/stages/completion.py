@@ -146,6 +146,8 @@ _SOURCES: dict[str, Callable[[CompletionConfig], CandidateSource]] = {
 
 @dataclass(frozen=True)
 class CompletionResult:
+    """One frame's completion: the completed frame and what each step made of it (ffviz/recorder.py records them)."""
+
     frame: np.ndarray  # completed (H, W, 3) uint8
     missing: np.ndarray  # the stabilized frame's missing mask this started from
     mosaic: mosaic.MosaicResult
