@@ -1,8 +1,9 @@
 """Benchmark: local registration of the neighbours and the static fill (pipeline/stages/completion.py), before/after.
 
 "before": completion from the neighbours' global warps alone, the smooth fallback wherever the mosaic refused and no
-local warp reached (``register_model=None, static_fill=False``); "after": the defaults (each neighbour's warp refined
-by ECC on the band next to the missing area; the covering neighbour's best sample instead of the fallback).
+local warp reached (``register_model=None``, no "neighbour as is" among the candidates); "after": the defaults (each
+neighbour's warp refined by ECC on the band next to the missing area; the covering neighbour's best sample instead of
+the fallback).
 
 Columns:
   synth dB      PSNR over the synthesized pixels against ground truth (pipeline/evaluation/completion.py: synthetic
@@ -42,7 +43,8 @@ FLICKER_CLIPS = ("selh_asb_1.mp4", "linyihaolyh_shaky.mp4", "selh_tasc.mp4", "vp
                  "dfkimera_shaky.mp4")
 CROP_CLIPS = ("linyihaolyh_shaky.mp4", "vplab_C.avi", "selh_tasc.mp4", "sudheerachary_small-shaky-5.avi")
 SYNTHETIC = (("coffee", 1), ("coffee", 2), ("astronaut", 3), ("chelsea", 4), ("rocket", 5))
-BEFORE = CompletionConfig(register_model=None, static_fill=False)
+BEFORE = CompletionConfig(register_model=None,
+                          candidates=tuple(name for name in CompletionConfig().candidates if name != "neighbour as is"))
 AFTER = CompletionConfig()
 
 

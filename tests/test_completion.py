@@ -21,7 +21,7 @@ import pytest
 import skimage.data
 
 from pipeline.errors import ConfigError
-from pipeline.stages import completion, neighbours
+from pipeline.stages import candidates, completion, local_warp, neighbours
 from pipeline.evaluation.completion import (METHODS, CompletionScores, completion_scores, crop_completion_scores,
                                             jittered_crop)
 from pipeline.stages.smoothing import SmoothingConfig
@@ -31,6 +31,12 @@ from pipeline.evaluation.synthetic import SyntheticConfig, generate, psnr
 from tests.conftest import real_clip
 
 FULL = StabilizeConfig(mode="full")
+
+
+def _without(*names: str, config: completion.CompletionConfig = completion.CompletionConfig()
+             ) -> completion.CompletionConfig:
+    """``config`` with the candidate sources ``names`` left out of its chain."""
+    return dataclasses.replace(config, candidates=tuple(c for c in config.candidates if c not in names))
 
 
 def _pooled(scores: list[CompletionScores]) -> CompletionScores:
@@ -180,10 +186,10 @@ def test_an_object_that_passed_through_the_border_in_one_neighbour_is_not_pasted
     # t-3 and t-4 show it competes and wins, and completion/source says so; without that, t+2's guess fills most of
     # the strip. Where t-3, t-4 and t+2 all cover the strip, two of three agree: their median (the majority
     # candidate) explains the band as well as the scene does and fills most of it.
-    static_only = completion.CompletionConfig(majority_candidate=False)
+    static_only = _without("majority")
     scene_majority, _, majority = scene_share(completion.CompletionConfig())
     (scene, as_is, _), (scene_without, as_is_without, _) = (
-        scene_share(static_only), scene_share(dataclasses.replace(static_only, static_candidate_error=None)))
+        scene_share(static_only), scene_share(_without("neighbour as is", config=static_only)))
     # Measured: 0.999 of the strip shows the scene with the majority (0.89 of it by the majority); 0.56 without it, 0.30 of the strip t-3's or
     # t-4's sample as it is; without either, 0.26 and 0.
     assert scene_majority > 0.95 and majority > 0.8
@@ -220,7 +226,7 @@ def test_an_object_leaving_through_the_border_is_carried_on_by_its_own_motion_no
         return psnr(result.frame, truth, judged), psnr(result.frame, truth, missing), float(carried_on[disc & missing].mean())
 
     (carried, carried_strip, carried_share), (pasted, pasted_strip, pasted_share) = (
-        strip_psnr(completion.CompletionConfig()), strip_psnr(completion.CompletionConfig(extrapolate_motion=False)))
+        strip_psnr(completion.CompletionConfig()), strip_psnr(_without("carried on")))
     # completion/source shows the carried-on pixels: most of the disc's part of the strip, and none without.
     assert carried_share > 0.5 and pasted_share == 0.0
     # Measured: 23.6 against 15.9 dB over those pixels, 27.1 against 20.0 over the strip.
@@ -231,17 +237,16 @@ def test_an_object_leaving_through_the_border_is_carried_on_by_its_own_motion_no
 def test_a_moving_candidate_replaces_the_mosaic_only_where_it_halves_the_static_scenes_error():
     """On a motion-blurred frame every sharp sample explains the blurred surroundings worse, the static scene's
     included: a moving candidate must beat it by the margin and by a share, not by the margin alone."""
-    def candidate(error: float) -> completion._Candidate:
-        return completion._Candidate(np.zeros((1, 3), np.uint8), np.ones(1, bool), np.full(1, 6.0, np.float32),
-                                     np.full(1, error, np.float32), np.ones(1, bool))
+    def candidate(kind: str, error: float, motion: float) -> candidates.Candidate:
+        return candidates.Candidate(kind, np.zeros((1, 3), np.uint8), np.ones(1, bool), np.full(1, motion, np.float32),
+                                    np.full(1, error, np.float32), np.ones(1, bool), np.zeros(1, np.int16))
 
-    static_error = np.full(1, 30.0, np.float32)  # the mosaic's sample, on a blurred frame
-    chosen = np.zeros(1, np.int64)
+    doubted_mosaic = candidate("mosaic", 30.0, 0.0)  # the mosaic's sample, on a blurred frame
     default, margin_only = completion.CompletionConfig(), completion.CompletionConfig(mosaic_check_ratio=1.0)
     for error, replaces, replaces_on_margin in ((20.0, False, True), (14.0, True, True), (27.0, False, False)):
-        assert completion._moving_and_better([candidate(error)], chosen, static_error, default)[0] == replaces
-        assert completion._moving_and_better([candidate(error)], chosen, static_error, margin_only)[0] == \
-            replaces_on_margin
+        moving = candidate("local warp", error, 6.0)
+        assert (completion.choose([doubted_mosaic, moving], default)[0] == 1) == replaces
+        assert (completion.choose([doubted_mosaic, moving], margin_only)[0] == 1) == replaces_on_margin
     with pytest.raises(ConfigError):
         completion.CompletionConfig(mosaic_check_ratio=0.0)
 
@@ -301,7 +306,7 @@ def test_nan_median_columns_equals_numpy_nanmedian():
     values[:10, 1] = np.nan  # two: the mean of both
     values[:, 2] = np.arange(12)  # even count, no NaN
     values = values[:, ~np.isnan(values).all(axis=0)]
-    result = completion._nan_median_columns(values)
+    result = candidates.nan_median_columns(values)
     assert result.dtype == np.float32
     np.testing.assert_array_equal(result, np.nanmedian(values, axis=0))
 
@@ -311,11 +316,11 @@ def test_dilate_by_increasing_radii_equals_square_kernels():
     mask = rng.random((90, 130)) < 0.01
     mask[:, :3] = True
     radii = (0, 2, 2, 7, 40)
-    for radius, grown in zip(radii, completion._dilate(mask, *radii)):
+    for radius, grown in zip(radii, local_warp.dilate(mask, *radii)):
         square = cv2.dilate(mask.astype(np.uint8), np.ones((2 * radius + 1,) * 2, np.uint8)) > 0
         np.testing.assert_array_equal(grown, square)
     with pytest.raises(ValueError):
-        completion._dilate(mask, 5, 3)
+        local_warp.dilate(mask, 5, 3)
 
 
 def _world(pad: int, height: int = 180, width: int = 320) -> np.ndarray:
@@ -395,8 +400,7 @@ def test_a_border_only_far_neighbours_see_takes_their_best_sample_not_the_smooth
     frames = {-5: truth, 5: occluded, -1: truth, 1: truth, -2: truth, 2: truth}
     valid = {o: seen_by_far if abs(o) == 5 else near_valid for o in frames}
     result = completion.complete(target, missing, _neighbours(frames, valid))
-    plain = completion.complete(target, missing, _neighbours(frames, valid),
-                                completion.CompletionConfig(static_fill=False))
+    plain = completion.complete(target, missing, _neighbours(frames, valid), _without("neighbour as is"))
     assert plain.fallback[missing].mean() > 0.9  # without it: the smooth last resort
     assert not result.fallback.any()
     assert (result.filled_by[missing] == -5).mean() > 0.95

@@ -24,7 +24,8 @@ REPO = Path(__file__).resolve().parents[1]
 # config class -> keyword arguments that each make it invalid
 BAD = {
     completion.CompletionConfig: [dict(neighbour_frames=-1), dict(max_warp_neighbours=-1), dict(flow_max_side=8),
-                                  dict(residual_radius=-1), dict(static_candidate_error=-1.0)],
+                                  dict(residual_radius=-1), dict(static_candidate_error=-1.0),
+                                  dict(candidates=("local warp", "nope")), dict(candidates=("majority", "majority"))],
     deblur.DeblurConfig: [dict(alpha=0.0), dict(neighbour_frames=-1), dict(min_ratio=0.5), dict(error_sigma_px=-1.0),
                           dict(reject_error=0.0), dict(structure_min=2.0), dict(structure_window_px=0)],
     fmm.MotionInpaintConfig: [dict(radius_px=0), dict(colour_epsilon=0.0)],

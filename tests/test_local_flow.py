@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.stages import completion
+from pipeline.stages import local_warp
 from pipeline.evaluation import synthetic
 from pipeline.stages.local_flow import LocalFlowConfig, fill_invalid, local_flow, mean_abs_difference
 from pipeline.imaging import intensity
@@ -81,7 +81,7 @@ def test_priority_is_nearest_in_time_first_with_eq_23_breaking_ties(photo):
     misaligned = shifted(photo, 3.0, 2.0)
     neighbours = [WarpedNeighbour(offset, rgb, valid) for offset, rgb in
                   ((-1, misaligned), (1, photo), (-2, photo), (2, photo), (3, photo))]
-    order, errors = completion._priority(photo, valid, neighbours, needed=4)
+    order, errors = local_warp.priority(photo, valid, neighbours, needed=4)
     assert [neighbours[i].offset for i in order] == [1, -1, -2, 2, 3]  # equal errors: t-k first
     assert errors[1] == 0.0 and errors[0] > 5.0
     assert np.isnan(errors[4])  # four usable neighbours were ordered before t+3: its error is never measured

@@ -1,5 +1,5 @@
 """Neighbours warped only where they are looked at (pipeline/stages/neighbours.py), and the two completion helpers
-that look at them locally (completion._work_boxes, completion._LocalError).
+that look at them locally (local_warp.work_boxes, candidates.LocalError).
 
 A lazy neighbour must answer what the whole-frame warp (pipeline.stages.warping.warp_frame) answers: crops and
 integer-point lookups within OpenCV's fixed-point rounding (measured: at most 1 level on < 0.1% of pixels,
@@ -16,7 +16,7 @@ from scipy import ndimage
 from skimage import data
 
 from pipeline import geometry, imaging
-from pipeline.stages import completion, warping
+from pipeline.stages import candidates, local_warp, warping
 from pipeline.stages.neighbours import Downscaled, WarpedNeighbour, shrink, shrink_all, warp_neighbours
 
 H, W = 240, 320
@@ -292,7 +292,7 @@ def test_warp_neighbours_of_nothing_and_of_the_frame_itself(photo):
     assert only.offset == 0 and np.allclose(only.other_from_stab, _translation(2.0, 1.0))
 
 
-# --- completion._work_boxes -------------------------------------------------------------------------------------
+# --- local_warp.work_boxes --------------------------------------------------------------------------------------
 
 
 def _grown(ys: slice, xs: slice, margin: int, shape: tuple[int, int]) -> tuple[int, int, int, int]:
@@ -313,7 +313,7 @@ def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bool
 
 
 def _boxes(wanted: np.ndarray, margin: int | None) -> list[tuple[tuple[int, int, int, int], list[tuple[int, int, int, int]]]]:
-    return [(_as_tuple(w.box), [_as_tuple(r) for r in w.owned]) for w in completion._work_boxes(wanted, margin)]
+    return [(_as_tuple(w.box), [_as_tuple(r) for r in w.owned]) for w in local_warp.work_boxes(wanted, margin)]
 
 
 def _area(box: tuple[int, int, int, int]) -> int:
@@ -403,19 +403,19 @@ def test_a_pixel_takes_the_flow_of_the_box_that_owns_it_where_boxes_overlap():
     xs = np.array([5, 25, 55, 10, 95, 5])
     # Owned by the first though inside the second's box too; owned by the second; only in the first's box;
     # only in the second's; in none.
-    assert completion._owners([first, second], ys, xs).tolist() == [0, 0, 1, 0, 1, -1]
+    assert local_warp.owners([first, second], ys, xs).tolist() == [0, 0, 1, 0, 1, -1]
 
 
 def test_work_boxes_without_a_margin_are_the_whole_frame():
     wanted = np.zeros((90, 160), bool)
     wanted[3, 4] = True
     whole = (slice(0, 90), slice(0, 160))
-    assert [(w.box, w.owned) for w in completion._work_boxes(wanted, None)] == [(whole, (whole,))]
-    assert completion._work_boxes(np.zeros((90, 160), bool), 10) == []
-    assert completion._work_boxes(np.zeros((90, 160), bool), None) == []
+    assert [(w.box, w.owned) for w in local_warp.work_boxes(wanted, None)] == [(whole, (whole,))]
+    assert local_warp.work_boxes(np.zeros((90, 160), bool), 10) == []
+    assert local_warp.work_boxes(np.zeros((90, 160), bool), None) == []
 
 
-# --- completion._LocalError -------------------------------------------------------------------------------------
+# --- candidates.LocalError --------------------------------------------------------------------------------------
 
 
 @pytest.fixture(scope="module")
@@ -453,7 +453,7 @@ def _brute_force(target, known, neighbour, landed, ys, xs, nearest_y, nearest_x,
 def test_local_error_constant_cases(target, region):
     missing = _strip(target.shape[:2]) if region == "strip" else _rotated(target)
     ys, xs = np.nonzero(missing)
-    local = completion._LocalError(target, ~missing, ys, xs, radius=4)
+    local = candidates.LocalError(target, ~missing, ys, xs, radius=4)
     band_y, band_x = local.band_y, local.band_x
     assert not missing[band_y, band_x].any()  # the band is known pixels only
     everywhere = np.ones(len(band_y), bool)
@@ -472,7 +472,7 @@ def test_local_error_against_brute_force(target, region):
     missing = _strip(target.shape[:2]) if region == "strip" else _rotated(target)
     known = ~missing
     ys, xs = np.nonzero(missing)
-    local = completion._LocalError(target, known, ys, xs, radius)
+    local = candidates.LocalError(target, known, ys, xs, radius)
     rng = np.random.default_rng(7)
     neighbour = cv2.GaussianBlur(np.roll(target, 3, axis=1), (0, 0), 1.5)  # misaligned and blurred
     landed = rng.random(known.shape) > 0.3

@@ -20,6 +20,9 @@ def test_default_is_the_config_as_given_and_fast_changes_only_completion_and_deb
     assert fast.completion.max_warp_neighbours < config.completion.max_warp_neighbours
     assert fast.completion.flow_max_side < config.completion.flow_max_side
     assert config.completion.register_model is not None and fast.completion.register_model is None
+    # a shorter chain of candidate sources, in the default's order
+    assert fast.completion.candidates == ("local warp", "neighbour as is", "majority")
+    assert config.completion.candidates == ("mosaic", "local warp", "neighbour as is", "majority", "carried on")
     assert fast.deblur.neighbour_frames < config.deblur.neighbour_frames and fast.deblur.alpha == config.deblur.alpha
     # the completion window still holds every neighbour the deblurring compares
     assert fast.deblur.neighbour_frames <= fast.completion.neighbour_frames

@@ -24,7 +24,7 @@ from ffviz.recording.view import ViewSize
 from pipeline.results import FrameResult, Stamp
 from pipeline.runtime.colour import ColourDescription, display_rgb
 from pipeline.stages.completion import SOURCE_FALLBACK, SOURCE_MOSAIC, SOURCE_NAMES, CompletionResult, from_a_neighbour
-from pipeline.stages.completion import _claims as flow_piece_claims
+from pipeline.stages.local_warp import claims as flow_piece_claims
 from pipeline.stages.deblur import DeblurResult
 
 # An RGBA image's alpha is used by the viewer (rerun 0.41) only when the image's opacity is below 1: at the default
