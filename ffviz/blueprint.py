@@ -10,6 +10,7 @@ from typing import Callable, Sequence
 import rerun.blueprint as rrb
 
 from ffviz import entities as ent, visual
+from ffviz.recording.variants import VARIANTS, variant_entity
 
 TAB_ORDER = ("overview", "motion", "smoothing", "mosaic", "local flow + motion inpainting", "deblurring",
              "stage stepping", "about")
@@ -251,3 +252,72 @@ def default_blueprint(traced: Sequence[int] = (), *, crop: bool = False, rolling
         rrb.TimePanel(state="collapsed", timeline=ent.FRAME_TIMELINE, play_state="paused"),
         collapse_panels=True,
     )
+
+
+# -- the debugger's layout: one column per variant, the same stage side by side -----------------------------------
+
+DEBUG_NOTE = (
+    "**What-if debugger.** Each column is a variant of the frames rendered alone (`ffviz debug`): `default` with the "
+    "session's settings, the others with the settings their name says. Each tab is a stage; the same stage of every "
+    "variant sits side by side, with the same colour keys. Under a variant: its difference from the default at that "
+    "frame (largest channel change, and the pixels it filled another way). Move the time line to another debugged "
+    "frame.")
+
+
+def _variant(name: str, entity: str) -> str:
+    return variant_entity(name, entity)
+
+
+def _variant_columns(names: list[str], title: str, views) -> rrb.Container:
+    """One column per variant of ``views(name)`` (a list of views), titled with the variant's name."""
+    return rrb.Horizontal(*[rrb.Vertical(*views(name), name=f"{name}: {title}") for name in names], name=title)
+
+
+def debug_blueprint(names: list[str], *, paths: bool = False) -> rrb.Blueprint:
+    """``names``: the variants recorded so far, in order; ``paths``: some variant re-planned the path."""
+    def output(name: str) -> list[rrb.View]:
+        views = [_image(f"{name}: output", _variant(name, ent.OUTPUT_FRAME))]
+        if name != "default":
+            views.append(_map(f"{name}: change from the default", _variant(name, "diff/output")))
+        return views
+
+    def fill(name: str) -> list[rrb.View]:
+        views = [_image(f"{name}: filled how", _variant(name, ent.COMPLETION_FRAME), _variant(name, ent.COMPLETION_SOURCE)),
+                 _image(f"{name}: filled by", _variant(name, ent.COMPLETION_FRAME),
+                        _variant(name, ent.COMPLETION_FILLED_BY))]
+        if name != "default":
+            views.append(_image(f"{name}: filled another way", _variant(name, ent.COMPLETION_FRAME),
+                                _variant(name, "diff/source")))
+        return views
+
+    def mosaic(name: str) -> list[rrb.View]:
+        return [_image(f"{name}: missing", _variant(name, ent.STABILIZED_FRAME), _variant(name, ent.STABILIZED_MISSING)),
+                _map(f"{name}: mosaic variance", _variant(name, ent.COMPLETION_VARIANCE)),
+                _image(f"{name}: mosaic accepted", _variant(name, ent.COMPLETION_FRAME),
+                       _variant(name, ent.COMPLETION_ACCEPTED))]
+
+    def flow(name: str) -> list[rrb.View]:
+        return [_image(f"{name}: local flow", _variant(name, ent.COMPLETION_FLOW_IMAGE),
+                       _variant(name, ent.COMPLETION_FLOW_ARROWS)),
+                _map(f"{name}: FMM order", _variant(name, ent.COMPLETION_FMM_ORDER)),
+                _map(f"{name}: FMM arrival", _variant(name, ent.COMPLETION_FMM_ARRIVAL))]
+
+    def deblurring(name: str) -> list[rrb.View]:
+        return [_image(f"{name}: deblurred", _variant(name, ent.DEBLUR_AFTER), _variant(name, ent.DEBLUR_SOURCE)),
+                _image(f"{name}: weights", _variant(name, ent.DEBLUR_WEIGHTS))]
+
+    keys = rrb.Vertical(*[_key(key, key.replace("_", " ")) for key in ("diff", "source", "filled_by", "accepted",
+                                                                        "variance", "fmm_order", "deblur_weights")],
+                        rrb.TextDocumentView(name="how to read", origin=f"/{ent.note_entity('debug')}"))
+    tabs = [rrb.Horizontal(_variant_columns(names, title, views), keys, column_shares=[5, 1], name=title)
+            for title, views in (("output", output), ("completion", fill), ("mosaic", mosaic),
+                                 ("flow + FMM", flow), ("deblurring", deblurring))]
+    if paths:  # the original path and each variant's planned one, per axis
+        tabs.append(rrb.Vertical(*[rrb.TimeSeriesView(name=f"camera path {axis} ({unit}): original and each variant's",
+                                                      origin=f"/{VARIANTS}", contents=[f"/{VARIANTS}/**/{axis}"])
+                                   for axis, unit in (("x", "px"), ("y", "px"), ("angle", "deg"))], name="path"))
+    tabs.append(rrb.Vertical(*[rrb.TextDocumentView(name=name, origin=f"/{_variant(name, 'about')}") for name in names],
+                             name="settings"))
+    return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0),
+                         rrb.TimePanel(state="collapsed", timeline=ent.FRAME_TIMELINE, play_state="paused"),
+                         collapse_panels=True)

@@ -97,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
     from ffviz.bench import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
 
     add_bench_parser(commands)
+    from ffviz.debug_command import add_parser as add_debug_parser  # imports no recorder: that happens when it runs
+
+    add_debug_parser(commands, _record_size, RECORD_SIZE)
     return parser
 
 
@@ -477,9 +480,15 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return run_bench(args)
 
 
+def cmd_debug(args: argparse.Namespace) -> int:
+    from ffviz.debug_command import cmd_debug as run
+
+    return run(args)
+
+
 COMMANDS = {"stabilize": cmd_stabilize, "demo": cmd_demo, "metrics": cmd_metrics, "view": cmd_view,
             "snapshot": cmd_snapshot, "compare": cmd_compare,
-            "figures": cmd_figures, "batch": cmd_batch, "bench": cmd_bench}
+            "figures": cmd_figures, "batch": cmd_batch, "bench": cmd_bench, "debug": cmd_debug}
 
 
 def _nothing_written(args: argparse.Namespace) -> str:

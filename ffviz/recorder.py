@@ -11,10 +11,7 @@ path is smoothed) are also logged stage by stage on the ``stage`` timeline, at t
 from __future__ import annotations
 
 import dataclasses
-import os
-import tempfile
 import time
-import uuid
 from collections import Counter
 from pathlib import Path
 from typing import Any, Literal, Sequence
@@ -28,7 +25,7 @@ from ffviz.blueprint import TAB_NOTES, default_blueprint
 from ffviz.recording import about, digest, legends
 from ffviz.recording.backlog import BUDGET_BYTES, Backlog
 from ffviz.recording.encoders import VideoTrack, png
-from ffviz.recording.sink import PipedFile
+from ffviz.recording.sink import RecordingFile
 from ffviz.recording.view import RECORD_SIZE, ViewSize
 from pipeline import geometry
 from pipeline.errors import OutputError
@@ -73,18 +70,11 @@ class RerunRecorder:
             raise ValueError(f"record level must be one of {', '.join(RECORD_LEVELS)}, not {level!r}")
         self.path = Path(path)
         self.level, self.jpeg_quality, self.record_size, self.live_url = level, jpeg_quality, record_size, live_url
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".rrd.tmp", dir=self.path.parent)
-        os.close(fd)
-        self._tmp_path = Path(tmp)
-        # Rows batched into chunks (BATCHER): a chunk per log call costs its schema (a few kB) each time.
-        self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()),
-                                      batcher_config=BATCHER if live_url is None else LIVE_BATCHER)
-        self._file = PipedFile(self._tmp_path)  # the SDK writes into its pipe; its thread, into the file
-        if live_url is None:
-            self.rec.save(self._file.pipe_path)  # the default blueprint follows once the traced frames are known
-        else:  # both sinks at once: a running viewer (live view) and the file
-            rr.set_sinks(rr.GrpcSink(live_url), rr.FileSink(str(self._file.pipe_path)), recording=self.rec)
+        # Rows batched into chunks (BATCHER): a chunk per log call costs its schema (a few kB) each time. The default
+        # blueprint follows once the traced frames are known.
+        self._out = RecordingFile(self.path, application_id=application_id, live_url=live_url,
+                                  batcher=BATCHER if live_url is None else LIVE_BATCHER)
+        self.rec = self._out.rec
         self._key = f"rerun:{id(self)}"  # this recorder's digest in FrameResult.digests
         self._trace_requested = None if trace_frames is None else tuple(sorted({int(t) for t in trace_frames}))
         self.traced: tuple[int, ...] = self._trace_requested or ()
@@ -142,8 +132,8 @@ class RerunRecorder:
 
     def _check_file(self) -> None:
         """Stop at the first failed write to the file (a full disk), not at the end of the run."""
-        if self._file.error is not None:
-            raise self._file.error
+        if self._out.error is not None:
+            raise self._out.error
 
     # -- Observer ---------------------------------------------------------------------------------
 
@@ -483,15 +473,9 @@ class RerunRecorder:
             self._send_blueprint()
             for track in self._tracks.values():
                 track.close()
-            self.rec.flush()
-            self.rec.disconnect()
-            self._file.close()
+            self._out.finish()
         except Exception as error:  # noqa: BLE001 - the writer's failure, said in one line
             raise self._failure(error, during_run=False) from error
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(self._tmp_path, 0o666 & ~umask)  # mkstemp made it private; give it the usual mode
-        os.replace(self._tmp_path, self.path)
 
     def abort(self) -> None:
         """Drop the recording: nothing half-written is left behind."""
@@ -501,9 +485,4 @@ class RerunRecorder:
 
     def _abort_stream(self) -> None:
         self._closed = True
-        for step in (self.rec.disconnect, self._file.close):
-            try:
-                step()
-            except Exception:  # noqa: BLE001 - dropping it anyway
-                pass
-        self._tmp_path.unlink(missing_ok=True)
+        self._out.drop()

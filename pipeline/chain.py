@@ -204,6 +204,18 @@ def _fps(times_s: list[float]) -> float:
     return (len(times_s) - 1) / (times_s[-1] - times_s[0]) if len(times_s) > 1 and times_s[-1] > times_s[0] else 30.0
 
 
+def temporal_radius(config: StabilizeConfig) -> int:
+    """Frames on each side whose completed frames temporal consistency averages into a frame (0: it does not run)."""
+    return config.completion.temporal.radius if config.completing else 0
+
+
+def frames_read(config: StabilizeConfig, frames: range, n_frames: int) -> range:
+    """The input frames render_frames reads to make ``frames`` of an ``n_frames`` video: the frames temporal
+    consistency averages in are rendered too, each with its window."""
+    margin = temporal_radius(config) + config.window_frames
+    return range(max(frames.start - margin, 0), min(frames.stop + margin, n_frames))
+
+
 class FrameChain:
     """One frame and its window -> one FrameResult. Safe to call from several threads at once: it only reads the
     window and the plan (the caches it keeps are locked)."""
@@ -226,7 +238,7 @@ class FrameChain:
         self.keep = keep
         # completion's temporal consistency (smoothed_stream) holds each frame's completed frame and mask (FrameResult.
         # completed) until the frames next to it are made, whether intermediates are kept or not
-        self.temporal_radius = config.completion.temporal.radius if config.completing else 0
+        self.temporal_radius = temporal_radius(config)
         self.energy_cache = deblur.EnergyCache()  # each frame's gradients computed once while it is in the window
         self.downscaled: neighbours.Downscaled | None = None  # frames at completion's flow resolution
         # --rolling-shutter: completion and deblurring draw on frames corrected to their middle rows' views

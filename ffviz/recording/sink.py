@@ -1,5 +1,5 @@
-"""The recording's file, written by a thread of ours: the SDK's file sink writes into a pipe that this thread
-drains into the file.
+"""The recording's file: a RecordingStream saved beside its place and renamed when finished (``RecordingFile``),
+written by a thread of ours: the SDK's file sink writes into a pipe that this thread drains into the file.
 
 So a failed write (a full disk) is an ``OSError`` with its reason, ours to report in one line, instead of the SDK's
 writer stopping with a log line and its flush waiting for ever; after a failure the pipe is still drained (and the
@@ -12,7 +12,10 @@ import os
 import shutil
 import tempfile
 import threading
+import uuid
 from pathlib import Path
+
+import rerun as rr
 
 READ_BYTES = 1 << 20
 
@@ -74,3 +77,46 @@ class PipedFile:
         shutil.rmtree(self._folder, ignore_errors=True)
         if self.error is not None:
             raise self.error
+
+
+class RecordingFile:
+    """``rec``, a RecordingStream saved to ``path`` (and streamed to a viewer at ``live_url``): written to a hidden
+    file beside ``path`` through a ``PipedFile`` and renamed at ``finish``; ``drop`` leaves nothing behind."""
+
+    def __init__(self, path: Path, *, application_id: str, batcher: rr.ChunkBatcherConfig,
+                 live_url: str | None = None) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".rrd.tmp", dir=self.path.parent)
+        os.close(fd)
+        self._tmp_path = Path(tmp)
+        self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()), batcher_config=batcher)
+        self._file = PipedFile(self._tmp_path)
+        if live_url is None:
+            self.rec.save(self._file.pipe_path)
+        else:  # both sinks at once: a running viewer (live view) and the file
+            rr.set_sinks(rr.GrpcSink(live_url), rr.FileSink(str(self._file.pipe_path)), recording=self.rec)
+
+    @property
+    def error(self) -> OSError | None:
+        """The first failed write to the file, if any (the run may stop there, not at the end)."""
+        return self._file.error
+
+    def finish(self) -> None:
+        """Everything written, the file moved into place; raises the writer's error (the caller drops the file)."""
+        self.rec.flush()
+        self.rec.disconnect()
+        self._file.close()
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(self._tmp_path, 0o666 & ~umask)  # mkstemp made it private; give it the usual mode
+        os.replace(self._tmp_path, self.path)
+
+    def drop(self) -> None:
+        """Nothing half-written left behind."""
+        for step in (self.rec.disconnect, self._file.close):
+            try:
+                step()
+            except Exception:  # noqa: BLE001 - dropping it anyway
+                pass
+        self._tmp_path.unlink(missing_ok=True)

@@ -5,6 +5,7 @@ The orchestrator makes two passes, so a source hands out a fresh iterator per pa
 
 from __future__ import annotations
 
+import dataclasses
 from contextlib import contextmanager
 from fractions import Fraction
 from pathlib import Path
@@ -56,6 +57,40 @@ class FileSource:
         if self._reader is not None:
             self._warnings.extend(self._reader.warnings)
             self._reader.warnings.clear()
+        drained, self._warnings = self._warnings, []
+        return drained
+
+
+class WindowSource:
+    """Frames ``first`` to ``stop`` (not included) of a video file whose frames' times (``times_s``, a whole pass's)
+    are known, decoded from the key frame before the first, numbered as in a whole pass. One frame's window is
+    rendered alone this way (the debugger), without decoding the video before it."""
+
+    def __init__(self, path: Path | str, times_s: Sequence[float], first: int, stop: int) -> None:
+        if not 0 <= first < stop <= len(times_s):
+            raise ValueError(f"frames {first}-{stop - 1} are not within the video's {len(times_s)}")
+        self.path = Path(path)
+        self.info = video_reader.probe_video(self.path)
+        self._times, self._first, self._stop = list(times_s), first, stop
+        self._warnings: list[str] = []
+
+    def frames(self) -> Iterator[Frame]:
+        times, first, stop = self._times, self._first, self._stop
+        end_s = times[stop] if stop < len(times) else None
+        leeway = 0.5 / float(self.info.fps or 30)
+        with video_reader.VideoReader(self.path, keep_depth=True, start_s=times[first] if first else None,
+                                      end_s=end_s) as reader:
+            try:
+                for offset, frame in enumerate(reader):
+                    index = first + offset
+                    if index >= stop or abs(frame.time_s - times[index]) > leeway:
+                        raise InputError(f"{self.path}: frame {index} decodes at {frame.time_s:.3f} s after a seek, "
+                                         f"not at {times[index]:.3f} s as read from the start")
+                    yield dataclasses.replace(frame, index=index)
+            finally:
+                self._warnings.extend(reader.warnings)
+
+    def drain_warnings(self) -> list[str]:
         drained, self._warnings = self._warnings, []
         return drained
 

@@ -1,0 +1,151 @@
+"""The what-if debugger: a frame rendered alone equals that frame of a whole run; settings by name; variants
+recorded side by side with their differences; the scriptable `ffviz debug`; bad input refused before anything."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ffviz import cli, entities as ent
+from ffviz.debugger import Debugger
+from ffviz.recording.variants import variant_entity
+from ffviz.rrd import Recording
+from pipeline import settings as named
+from pipeline.config import StabilizeConfig
+from pipeline.errors import ConfigError
+from pipeline.evaluation import synthetic
+from pipeline.frame_session import FrameSession
+from pipeline.runtime.observer import StageCollector
+from pipeline.stabilize import stabilize
+from tests.conftest import real_clip
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    path = tmp_path_factory.mktemp("debug") / "shaky.mp4"
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=24, seed=5)),
+                          path)
+    return path
+
+
+def _whole_run(path, config):
+    outputs = StageCollector("output")
+    stabilize(path, None, config, observer=outputs)
+    return [rgb for _, rgb in outputs.results["output"]]
+
+
+@pytest.mark.parametrize("config", [StabilizeConfig(), StabilizeConfig(mode="crop"),
+                                    named.with_settings(StabilizeConfig(), {"deblur.alpha": "4",
+                                                                            "completion.neighbour_frames": "2"})],
+                         ids=["full", "crop", "settings"])
+def test_a_frame_rendered_alone_is_the_whole_runs_frame(clip, config, tmp_path):
+    whole = _whole_run(clip, config)
+    session = FrameSession(clip, config, cache=tmp_path / "motion.npz")
+    for t in (0, 1, 11, 22, 23):  # the ends (windows cut short) and the middle
+        np.testing.assert_array_equal(session.render(t).output, whole[t], err_msg=f"frame {t}")
+
+
+@pytest.mark.real_video
+def test_a_real_clips_frame_rendered_alone_is_the_whole_runs_frame(tmp_path):
+    path = real_clip("sudheerachary_small-shaky-5.avi")
+    whole = _whole_run(path, StabilizeConfig())
+    session = FrameSession(path, cache=tmp_path / "motion.npz")
+    for t in (0, 57, 131, len(whole) - 1):  # decoded after a seek to the key frame before each window
+        np.testing.assert_array_equal(session.render(t).output, whole[t], err_msg=f"frame {t}")
+
+
+def test_pass_1_is_read_from_its_cache_and_recomputed_when_the_input_changes(clip, tmp_path, monkeypatch):
+    cache = tmp_path / "motion.npz"
+    first = FrameSession(clip, cache=cache)
+    import pipeline.frame_session as frame_session
+
+    def refused(*args, **kwargs):
+        raise AssertionError("pass 1 ran again")
+
+    monkeypatch.setattr(frame_session, "estimate_motion", refused)
+    again = FrameSession(clip, cache=cache)
+    np.testing.assert_array_equal(again.motion.curr_from_prev, first.motion.curr_from_prev)
+    assert again.motion.times_s == first.motion.times_s
+    with pytest.raises(AssertionError, match="pass 1 ran again"):  # other motion settings: another key
+        FrameSession(clip, named.with_settings(StabilizeConfig(), {"motion.max_corners": "200"}), cache=cache)
+
+
+def test_variants_are_recorded_side_by_side_with_their_differences(clip, tmp_path):
+    rrd = tmp_path / "debug.rrd"
+    with Debugger(clip, rrd=rrd) as debugger:
+        default = debugger.frame(12)
+        tight = debugger.frame(12, {"completion.neighbour_frames": 1}, name="tight")
+        path = debugger.frame(12, {"smoothing.radius_frames": "5"})
+    assert default.completion is not None and default.deblur is not None  # every intermediate returned
+    assert not np.array_equal(default.output, tight.output)
+    recording = Recording.load(rrd)
+    for name in ("default", "tight", "radius_frames=5"):
+        for entity in (ent.OUTPUT_FRAME, ent.COMPLETION_SOURCE, ent.STABILIZED_MISSING, ent.COMPLETION_VARIANCE):
+            assert recording.indices(variant_entity(name, entity)) == [12], (name, entity)
+    frames, psnr = recording.scalars(variant_entity("tight", "diff/stats/psnr_db"))
+    assert list(frames) == [12] and 20 < psnr[0] < 99
+    _, changed = recording.scalars(variant_entity("tight", "diff/stats/changed_source"))
+    changed_map = recording.image(variant_entity("tight", "diff/source"), 12)
+    assert 0 < changed[0] == pytest.approx(changed_map.mean(), abs=1e-6)
+    difference = recording.image(variant_entity("tight", "diff/output"), 12)
+    assert difference.shape[:2] == default.output.shape[:2]
+    assert variant_entity("default", "diff/output") not in recording.entities
+    # the path-shaping variant re-planned the path: both paths recorded for every frame
+    for name in ("default", "radius_frames=5"):
+        frames, _ = recording.scalars(variant_entity(name, "path/x"))
+        assert len(frames) == 24
+
+
+def test_bad_settings_and_frames_are_refused_before_anything_is_recorded(clip, tmp_path):
+    rrd = tmp_path / "debug.rrd"
+    with Debugger(clip, rrd=rrd) as debugger:
+        for settings, words in (({"deblur.alfa": 4}, "alpha, enabled"), ({"completion.neighbour_frames": -2}, ">= 0"),
+                                ({"deblur.alpha": "four"}, "a number"), ({"motion.max_corners": 10}, "open the video"),
+                                ({"deblur": 4}, "deblur.alpha")):
+            with pytest.raises(ConfigError, match=words):
+                debugger.frame(3, settings)
+        with pytest.raises(ConfigError, match="0-23"):
+            debugger.frame(24)
+        assert debugger.rendered == []
+    assert not any(entity.startswith("variants/") for entity in Recording.load(rrd).entities)
+
+
+def test_the_scriptable_form_records_the_default_and_one_variant_per_set(clip, tmp_path, capsys):
+    rrd = tmp_path / "review.rrd"
+    assert cli.main(["debug", str(clip), "--frame", "5,17", "--set", "deblur.alpha=4", "--set",
+                     "completion.neighbour_frames=2,deblur.alpha=4", "--rrd", str(rrd)]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("| 5 |") or line.startswith("| 17 |")]
+    assert len(rows) == 6 and "neighbour_frames=2,alpha=4" in out and f"wrote {rrd}" in out
+    recording = Recording.load(rrd)
+    for name in ("default", "alpha=4", "neighbour_frames=2,alpha=4"):
+        assert recording.indices(variant_entity(name, ent.OUTPUT_FRAME)) == [5, 17]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--frame", "3", "--set", "deblur.alfa=4"], "unknown setting 'deblur.alfa'; the settings of 'deblur' are: alpha"),
+    (["--frame", "3", "--set", "completion.neighbour_frames=-1"], "completion radius must be >= 0"),
+    (["--frame", "99"], "not in the video, whose frames are 0-23"),
+    (["--frame", "3", "--set", "motion.max_corners=9"], "go in --base"),
+])
+def test_bad_input_is_one_line_and_no_recording(clip, tmp_path, capsys, argv, words):
+    rrd = tmp_path / "bad.rrd"
+    assert cli.main(["debug", str(clip), "--rrd", str(rrd), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err
+    assert not rrd.exists() and not list(tmp_path.glob(".bad.*"))
+
+
+def test_settings_by_name_read_each_type_and_name_the_choices():
+    config = named.with_settings(StabilizeConfig(), {"deblur.enabled": "off", "completion.flow_max_side": "none",
+                                                     "completion.candidates": "local warp+majority",
+                                                     "smoothing.max_shift": "12.5", "mode": "crop"})
+    assert (config.deblur.enabled, config.completion.flow_max_side, config.completion.candidates,
+            config.smoothing.max_shift, config.mode) == (False, None, ("local warp", "majority"), 12.5, "crop")
+    assert named.parse_settings("a.b=1, c.d=x y") == {"a.b": "1", "c.d": "x y"}
+    assert named.label({"deblur.alpha": 4, "smoothing.radius_frames": "90"}) == "alpha=4,radius_frames=90"
+    assert "completion.mosaic.variance_threshold" in named.setting_names()
+    with pytest.raises(ConfigError, match="choose one of full, none, crop"):
+        named.with_settings(StabilizeConfig(), {"mode": "zoom"})
+    with pytest.raises(ConfigError, match="expected SECTION.FIELD=VALUE"):
+        named.parse_settings("deblur.alpha")
