@@ -149,3 +149,51 @@ def test_settings_by_name_read_each_type_and_name_the_choices():
         named.with_settings(StabilizeConfig(), {"mode": "zoom"})
     with pytest.raises(ConfigError, match="expected SECTION.FIELD=VALUE"):
         named.parse_settings("deblur.alpha")
+
+
+class _FakeViewer:
+    """What the notebook panel uses of rerun.notebook.Viewer: its event callbacks and the time control."""
+
+    def __init__(self) -> None:
+        self.callbacks, self.times = [], []
+
+    def on_event(self, callback) -> None:
+        self.callbacks.append(callback)
+
+    def set_time_ctrl(self, *, timeline=None, sequence=None, **_) -> None:
+        self.times.append((timeline, sequence))
+
+    def emit(self, event) -> None:
+        for callback in self.callbacks:
+            callback(event)
+
+
+def test_the_notebook_follows_the_time_cursor_and_renders_the_frame_on_apply(clip, tmp_path):
+    """The viewer's events move the frame control (JSON as the widget sends them, parsed by rerun's own reader);
+    "apply" renders the frame the cursor is on with the changed settings; a bad setting is a line, not a render."""
+    import ipywidgets
+    from rerun._event import _viewer_event_from_json_str
+
+    from ffviz.debug_app import DebugSession, _notebook_panel
+
+    with Debugger(clip, rrd=tmp_path / "nb.rrd") as debugger:
+        session = DebugSession(debugger)
+        viewer = _FakeViewer()
+        panel = _notebook_panel(session, viewer, ipywidgets)
+        ids = '"application_id": "ffviz-debug", "recording_id": "r"'
+        viewer.emit(_viewer_event_from_json_str('{"type": "timeline_change", "timeline": "frame", "time": 3, ' + ids + '}'))
+        viewer.emit(_viewer_event_from_json_str('{"type": "time_update", "time": 9, ' + ids + '}'))
+        frame_box = panel.children[0].children[0]
+        assert session.frame == 9 and frame_box.value == 9
+        viewer.emit(_viewer_event_from_json_str('{"type": "time_update", "time": 500, ' + ids + '}'))
+        assert session.frame == 23  # clamped to the last frame
+        frame_box.value = 9  # typed: the viewer's cursor follows
+        assert viewer.times[-1] == (ent.FRAME_TIMELINE, 9)
+        controls = {child.description: child for child in panel.children[1].children}
+        controls["deblur alpha (eq. 31)"].value = "4"
+        apply, status = panel.children[0].children[2], panel.children[3]
+        apply.click()
+        assert debugger.rendered[-1][:2] == (9, "alpha=4") and "variant 'alpha=4' rendered" in status.value
+        controls["deblur alpha (eq. 31)"].value = "-1"
+        apply.click()
+        assert status.value.startswith("not rendered:") and "alpha" in status.value and len(debugger.rendered) == 1
