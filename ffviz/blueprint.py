@@ -18,8 +18,8 @@ TAB_ORDER = ("overview", "motion", "smoothing", "mosaic", "local flow + motion i
 TAB_NOTES = {
     "overview": (
         "**How to read this recording.** The time line below is the frame number (`frame`): drag it or use the "
-        "arrow keys, space plays. Left: the input; right: the stabilized, completed, deblurred output. Below: the "
-        "camera path, original (warm colours) against smoothed (cool colours); the vertical line is the current "
+        "arrow keys, space plays. The input and the stabilized, completed, deblurred output side by side; with them, "
+        "the camera path, original (warm colours) against smoothed (cool colours); the vertical line is the current "
         "frame. Each tab after this one is a stage of the pipeline, in order; masks are drawn over the frames they "
         "describe, and every colour-mapped image has a colour key beside it. *stage stepping* follows a few frames "
         "through every stage (time line `stage`); *about* summarises the run and lists its warnings."),

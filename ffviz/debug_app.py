@@ -15,7 +15,7 @@ from typing import Any, Callable, Mapping
 from ffviz import entities as ent
 from pipeline import settings as named
 from pipeline.config import StabilizeConfig
-from pipeline.errors import FFVizError
+from pipeline.errors import FFVizError, InputError
 
 
 @dataclass(frozen=True)
@@ -144,3 +144,37 @@ def _notebook_panel(session: DebugSession, viewer: Any, widgets: Any) -> Any:
         control.style = {"description_width": "initial"}
     grid = widgets.GridBox(list(controls.values()), layout=widgets.Layout(grid_template_columns="repeat(3, 1fr)"))
     return widgets.VBox([widgets.HBox([frame, name, apply]), grid, extra, status])
+
+
+# -- `ffviz debug INPUT`: the same, in a page of our own (ffviz/debug_page.py) -------------------------------------
+
+def serve(input: Path, config: StabilizeConfig, *, rrd: Path, record_size: int | None, port: int,
+          workers: int | None = None) -> int:
+    """Open ``input``, render frame 0 as the default, serve the debugger page until Ctrl-C; the recording is
+    finished then."""
+    from http.server import ThreadingHTTPServer
+
+    from ffviz.debug_page import DebugPage
+    from ffviz.debugger import Debugger
+    from ffviz.progress import tqdm_progress
+
+    debugger = Debugger(input, config, rrd=rrd, stream=True, record_size=record_size, workers=workers,
+                        progress=tqdm_progress)
+    page = DebugPage(DebugSession(debugger))
+    try:
+        server = ThreadingHTTPServer(("127.0.0.1", port), page.handler())
+    except OSError as error:
+        debugger.abort()
+        raise InputError(f"cannot serve the debugger on 127.0.0.1:{port}: {error.strerror} (--port)") from None
+    page.start()
+    print(f"debugger: http://127.0.0.1:{server.server_address[1]}/  (Ctrl-C to stop; the recording: {rrd})",
+          flush=True)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.server_close()
+        debugger.close()
+    print(f"wrote {rrd}", flush=True)
+    return 0

@@ -33,18 +33,19 @@ import rerun as rr
 
 class Debugger:
     """``input`` opened for what-if rendering with ``config`` as the default, recorded to ``rrd`` (and shown live in
-    a viewer at ``live_url``). Pass 1's motion is cached beside the recording (``<rrd>.motion.npz``)."""
+    a viewer at ``live_url``, or with ``stream`` kept readable at ``recording.stream`` for a page). Pass 1's motion
+    is cached beside the recording (``<rrd>.motion.npz``)."""
 
     def __init__(self, input: Path | str, config: StabilizeConfig = StabilizeConfig(), *, rrd: Path | str,
-                 live_url: str | None = None, record_size: int | None = RECORD_SIZE, workers: int | None = None,
-                 progress: ProgressFactory = null_progress) -> None:
+                 live_url: str | None = None, stream: bool = False, record_size: int | None = RECORD_SIZE,
+                 workers: int | None = None, progress: ProgressFactory = null_progress) -> None:
         self.rrd = Path(rrd)
         self.session = FrameSession(input, config, cache=self.rrd.with_suffix(".motion.npz"), progress=progress,
                                     workers=workers)
         info = self.session.info
         self.recording = VariantRecording(self.rrd, width=info.width, height=info.height, fps=float(info.fps),
                                           colour=getattr(info, "colour", None), record_size=record_size,
-                                          live_url=live_url)
+                                          live_url=live_url, stream=stream)
         self.recording.rec.log(ent.note_entity("debug"), rr.TextDocument(blueprint.DEBUG_NOTE,
                                                                         media_type=rr.MediaType.MARKDOWN), static=True)
         self._paths = False
@@ -57,20 +58,27 @@ class Debugger:
 
     def frame(self, t: int, settings: Mapping[str, Any] | None = None, *, name: str | None = None) -> FrameResult:
         """Frame ``t`` with ``settings`` (``{"deblur.alpha": 4}``; values as text or typed; none: the default),
-        recorded as variant ``name`` (default: named by its settings). ConfigError, with nothing recorded, on an
-        unknown setting, a value out of range or a frame not in the video."""
+        recorded as variant ``name`` (default: named by its settings); the default is rendered at ``t`` first if it
+        was not yet, so that the two sit side by side with their difference. ConfigError, with nothing recorded, on
+        an unknown setting, a value out of range or a frame not in the video."""
         settings = dict(settings or {})
         config = self.config_of(settings)
-        name = name or named.label(settings)
+        if not 0 <= int(t) < self.n_frames:
+            raise ConfigError(f"frame {t} is not in the video: its frames are 0-{self.n_frames - 1}")
+        if settings and (int(t), "default") not in {(f, n) for f, n, _ in self.rendered}:
+            self._render(int(t), {}, "default", self.session.config)
+        return self._render(int(t), settings, name or named.label(settings), config)
+
+    def _render(self, t: int, settings: Mapping[str, Any], name: str, config: StabilizeConfig) -> FrameResult:
         started = time.perf_counter()
-        result = self.session.render(int(t), config)
+        result = self.session.render(t, config)
         seconds = time.perf_counter() - started
         if named.changes_path(settings):
             self._paths = True
             self.recording.log_path("default", self.session.plan)
             self.recording.log_path(name, self.session.plan_for(config), settings)
-        self.recording.log_variant(int(t), name, settings, result, seconds)
-        self.rendered.append((int(t), name, seconds))
+        self.recording.log_variant(t, name, settings, result, seconds)
+        self.rendered.append((t, name, seconds))
         self.recording.send_blueprint(blueprint.debug_blueprint(self.recording.names, paths=self._paths))
         if self.recording.error is not None:
             raise OutputError(f"cannot write the recording {self.rrd}: {self.recording.error.strerror}")

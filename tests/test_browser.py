@@ -471,3 +471,98 @@ def test_the_snapshot_waits_for_its_own_layout_before_the_screenshot():
 
     shot = _drive(Client, 0, Viewer(), 2, time.monotonic() + 30, tabs="ROOT", tab="ABOUT")
     assert shot == b"about" and Client.calls == 4
+
+
+# -- ffviz debug: the what-if debugger's page ---------------------------------------------------------------------
+
+DEBUG_CLIP = "sudheerachary_small-shaky-5.avi"
+
+
+def _evaluate(devtools: DevTools, expression: str):
+    return devtools.call("Runtime.evaluate", expression=expression, returnByValue=True)["result"].get("value")
+
+
+@pytest.mark.real_video
+def test_the_debugger_page_shows_a_new_variant_after_apply(tmp_path):
+    """`ffviz debug CLIP`: the page opens on frame 0's default render; moving to frame 150, changing a setting and
+    pressing apply renders frame 150 with it, and that variant's frame comes on screen; Ctrl-C leaves the recording
+    with both variants."""
+    from ffviz import entities as ent
+    from ffviz.recording.variants import variant_entity
+    from ffviz.rrd import Recording
+    from pipeline import settings as named
+    from pipeline.frame_session import FrameSession
+    from tests.conftest import real_clip
+
+    browser = chromium()
+    clip = real_clip(DEBUG_CLIP)
+    session = FrameSession(clip)
+    double = lambda rgb: cv2.resize(rgb, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)  # noqa: E731 (shown large)
+    first = double(session.render(0).output)
+    later = double(session.render(150, named.with_settings(session.config, {"deblur.alpha": "4"})).output)
+    port, rrd = free_port(), tmp_path / "debug.rrd"
+    debug = subprocess.Popen([sys.executable, "-m", "ffviz.cli", "debug", str(clip), "--port", str(port), "--rrd",
+                              str(rrd)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                             env=dict(os.environ, RERUN_ANALYTICS="0"), start_new_session=True)
+    chrome = devtools = None
+    try:
+        url = re.search(r"http://\S+", debug.stdout.readline()).group(0)
+        chrome, devtools = _open_page(browser, url, tmp_path / "profile")
+        assert _until(devtools, lambda shot: match_score(shot, first) >= MATCH_SCORE, tmp_path / "open.png"), \
+            f"frame 0's default render not on screen; {tmp_path}/open.png"
+        _evaluate(devtools, "const f = document.getElementById('frame'); f.value = 150; "
+                            "f.dispatchEvent(new Event('change'));")
+        _evaluate(devtools, "document.querySelector('[data-setting=\"deblur.alpha\"]').value = '4'; "
+                            "document.getElementById('apply').click();")
+        deadline = time.monotonic() + 120
+        while "rendered" not in (_evaluate(devtools, "window.ffviz.status") or "") and time.monotonic() < deadline:
+            time.sleep(1)
+        assert "variant 'alpha=4' rendered" in _evaluate(devtools, "window.ffviz.status")
+        assert _until(devtools, lambda shot: match_score(shot, later) >= MATCH_SCORE
+                      and match_score(shot, later) > match_score(shot, first), tmp_path / "applied.png"), \
+            f"frame 150's new variant not on screen; {tmp_path}/applied.png"
+    finally:
+        if devtools is not None:
+            devtools.close()
+        if chrome is not None:
+            stop(chrome)
+        if debug.poll() is None:
+            os.killpg(debug.pid, signal.SIGINT)
+            debug.wait(timeout=60)
+    recording = Recording.load(rrd)
+    assert recording.indices(variant_entity("default", ent.OUTPUT_FRAME)) == [0, 150]  # the default beside it
+    assert recording.indices(variant_entity("alpha=4", ent.OUTPUT_FRAME)) == [150]
+
+
+def _open_page(browser: str, url: str, profile: Path):
+    chrome = subprocess.Popen(
+        [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
+         "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--remote-debugging-address=127.0.0.1",
+         "--remote-debugging-port=0", f"--window-size={WINDOW[0]},{WINDOW[1]}", "about:blank"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    port_file = profile / "DevToolsActivePort"
+    deadline = time.monotonic() + 60
+    while not (port_file.is_file() and port_file.read_text().strip()):
+        assert chrome.poll() is None and time.monotonic() < deadline, "chromium did not start its DevTools server"
+        time.sleep(0.3)
+    port = int(port_file.read_text().split()[0])
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as response:
+        page = next(t for t in json.load(response) if t["type"] == "page")
+    devtools = DevTools(page["webSocketDebuggerUrl"])
+    devtools.call("Page.enable")
+    devtools.call("Emulation.setDeviceMetricsOverride", width=WINDOW[0], height=WINDOW[1], deviceScaleFactor=1,
+                  mobile=False)
+    devtools.call("Page.navigate", url=url)
+    return chrome, devtools
+
+
+def _until(devtools: DevTools, seen, picture: Path, timeout_s: float = OPEN_TIMEOUT_S) -> bool:
+    """Screenshots every 5 s until ``seen(shot)`` or the time is up; the last one saved to ``picture``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        time.sleep(5)
+        shot = screenshot(devtools)
+        if seen(shot) or time.monotonic() > deadline:
+            cv2.imwrite(str(picture), cv2.cvtColor(shot, cv2.COLOR_RGB2BGR))
+            return bool(seen(shot))

@@ -80,11 +80,12 @@ class PipedFile:
 
 
 class RecordingFile:
-    """``rec``, a RecordingStream saved to ``path`` (and streamed to a viewer at ``live_url``): written to a hidden
-    file beside ``path`` through a ``PipedFile`` and renamed at ``finish``; ``drop`` leaves nothing behind."""
+    """``rec``, a RecordingStream saved to ``path`` (and streamed to a viewer at ``live_url``; with ``stream``, also
+    to ``self.stream``, a BinaryStream the caller reads and forwards, e.g. to a page): written to a hidden file beside
+    ``path`` through a ``PipedFile`` and renamed at ``finish``; ``drop`` leaves nothing behind."""
 
     def __init__(self, path: Path, *, application_id: str, batcher: rr.ChunkBatcherConfig,
-                 live_url: str | None = None) -> None:
+                 live_url: str | None = None, stream: bool = False) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".rrd.tmp", dir=self.path.parent)
@@ -92,10 +93,12 @@ class RecordingFile:
         self._tmp_path = Path(tmp)
         self.rec = rr.RecordingStream(application_id, recording_id=str(uuid.uuid4()), batcher_config=batcher)
         self._file = PipedFile(self._tmp_path)
-        if live_url is None:
+        self.stream = rr.binary_stream(recording=self.rec) if stream else None
+        others = ([rr.GrpcSink(live_url)] if live_url else []) + ([self.stream] if stream else [])
+        if not others:
             self.rec.save(self._file.pipe_path)
-        else:  # both sinks at once: a running viewer (live view) and the file
-            rr.set_sinks(rr.GrpcSink(live_url), rr.FileSink(str(self._file.pipe_path)), recording=self.rec)
+        else:  # every sink at once: a running viewer (live view) or a stream, and the file
+            rr.set_sinks(*others, rr.FileSink(str(self._file.pipe_path)), recording=self.rec)
 
     @property
     def error(self) -> OSError | None:

@@ -52,12 +52,15 @@ class _Default:
 
 
 class VariantRecording:
-    """Writes variants to ``path`` (and to a viewer at ``live_url``); ``names`` in the order they came."""
+    """Writes variants to ``path`` (and to a viewer at ``live_url``, or to ``stream``); ``names`` in the order they
+    came."""
 
     def __init__(self, path: Path, *, width: int, height: int, fps: float, colour: ColourDescription | None,
-                 record_size: int | None, live_url: str | None = None) -> None:
-        self._out = RecordingFile(path, application_id="ffviz-debug", batcher=BATCHER, live_url=live_url)
+                 record_size: int | None, live_url: str | None = None, stream: bool = False) -> None:
+        self._out = RecordingFile(path, application_id="ffviz-debug", batcher=BATCHER, live_url=live_url,
+                                  stream=stream)
         self.rec = self._out.rec
+        self.stream = self._out.stream  # with ``stream``: what was recorded, to forward (BinaryStream.read)
         self.view = ViewSize.of(width, height, record_size)
         self.spec = digest.Spec("full", 90, self.view, colour or ColourDescription(), ())
         self.fps = fps
