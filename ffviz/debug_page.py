@@ -21,6 +21,7 @@ from types import SimpleNamespace
 from typing import Any
 
 from ffviz import entities as ent
+from ffviz.debug_session import MAIN_SETTINGS, current_value
 
 POLL_SECONDS = 25.0  # a long poll answers at the latest after this, empty
 NO_BUFFER = 0xFFFFFFFF
@@ -123,8 +124,6 @@ class DebugPage:
             self.status(line)
 
     def page(self) -> bytes:
-        from ffviz.debug_app import MAIN_SETTINGS, current_value
-
         config = self.session.debugger.session.config
         controls = []
         for control in MAIN_SETTINGS:

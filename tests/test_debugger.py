@@ -174,7 +174,8 @@ def test_the_notebook_follows_the_time_cursor_and_renders_the_frame_on_apply(cli
     import ipywidgets
     from rerun._event import _viewer_event_from_json_str
 
-    from ffviz.debug_app import DebugSession, _notebook_panel
+    from ffviz.debug_app import _notebook_panel
+    from ffviz.debug_session import DebugSession
 
     with Debugger(clip, rrd=tmp_path / "nb.rrd") as debugger:
         session = DebugSession(debugger)
