@@ -273,6 +273,11 @@ def _variant_columns(names: list[str], title: str, views) -> rrb.Container:
     return rrb.Horizontal(*[rrb.Vertical(*views(name), name=f"{name}: {title}") for name in names], name=title)
 
 
+def debug_tabs(paths: bool = False) -> tuple[str, ...]:
+    """The debugger layout's tabs, in order (``paths``: some variant re-planned the path)."""
+    return ("output", "completion", "mosaic", "flow + FMM", "deblurring") + (("path",) if paths else ()) + ("settings",)
+
+
 def debug_blueprint(names: list[str], *, paths: bool = False) -> rrb.Blueprint:
     """``names``: the variants recorded so far, in order; ``paths``: some variant re-planned the path."""
     def output(name: str) -> list[rrb.View]:
@@ -306,12 +311,14 @@ def debug_blueprint(names: list[str], *, paths: bool = False) -> rrb.Blueprint:
         return [_image(f"{name}: deblurred", _variant(name, ent.DEBLUR_AFTER), _variant(name, ent.DEBLUR_SOURCE)),
                 _image(f"{name}: weights", _variant(name, ent.DEBLUR_WEIGHTS))]
 
-    keys = rrb.Vertical(*[_key(key, key.replace("_", " ")) for key in ("diff", "source", "filled_by", "accepted",
-                                                                        "variance", "fmm_order", "deblur_weights")],
-                        rrb.TextDocumentView(name="how to read", origin=f"/{ent.note_entity('debug')}"))
-    tabs = [rrb.Horizontal(_variant_columns(names, title, views), keys, column_shares=[5, 1], name=title)
-            for title, views in (("output", output), ("completion", fill), ("mosaic", mosaic),
-                                 ("flow + FMM", flow), ("deblurring", deblurring))]
+    def keys() -> rrb.Container:  # a container of its own in each tab (a blueprint's parts have one place each)
+        return rrb.Vertical(*[_key(key, key.replace("_", " ")) for key in ("diff", "source", "filled_by", "accepted",
+                                                                            "variance", "fmm_order", "deblur_weights")],
+                            rrb.TextDocumentView(name="how to read", origin=f"/{ent.note_entity('debug')}"))
+
+    stages = dict(zip(debug_tabs(), (output, fill, mosaic, flow, deblurring)))
+    tabs = [rrb.Horizontal(_variant_columns(names, title, views), keys(), column_shares=[5, 1], name=title)
+            for title, views in stages.items()]
     if paths:  # the original path and each variant's planned one, per axis
         tabs.append(rrb.Vertical(*[rrb.TimeSeriesView(name=f"camera path {axis} ({unit}): original and each variant's",
                                                       origin=f"/{VARIANTS}", contents=[f"/{VARIANTS}/**/{axis}"])

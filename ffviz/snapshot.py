@@ -17,9 +17,11 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from ffviz import entities as ent
-from ffviz.blueprint import TAB_ORDER, default_blueprint
+from ffviz.blueprint import TAB_ORDER, debug_blueprint, debug_tabs, default_blueprint
+from ffviz.recording import variants
 from ffviz.viewer import check_recording, rerun_executable, stop_process_group
 from pipeline.errors import ConfigError, InputError
 
@@ -27,14 +29,28 @@ DEFAULT_SIZE = (1280, 800)  # logical points; the PNG is at the viewer's pixel s
 APPLICATION_ID = "ffviz"
 
 
-def tab_index(name: str) -> int:
+def tab_index(name: str, tabs: tuple[str, ...] = TAB_ORDER) -> int:
     """The tab a name (or an unambiguous prefix of one, any case) means."""
     wanted = name.strip().lower()
-    exact = [i for i, tab in enumerate(TAB_ORDER) if tab == wanted]
-    matches = exact or [i for i, tab in enumerate(TAB_ORDER) if tab.startswith(wanted)]
+    exact = [i for i, tab in enumerate(tabs) if tab == wanted]
+    matches = exact or [i for i, tab in enumerate(tabs) if tab.startswith(wanted)]
     if len(matches) != 1:
-        raise ConfigError(f"--tab {name!r}: choose one of {', '.join(repr(t) for t in TAB_ORDER)}")
+        raise ConfigError(f"--tab {name!r}: choose one of {', '.join(repr(t) for t in tabs)}")
     return matches[0]
+
+
+def recording_layout(recording: Path) -> tuple[Any, tuple[str, ...], str]:
+    """The layout ``recording`` opens with, its tabs' names and its application id: a run's, or the debugger's
+    (one column per variant, named in the recording)."""
+    from ffviz.rrd import Recording
+
+    loaded = Recording.load(recording)
+    if variants.NAMES in loaded.entities:
+        names = loaded.texts(variants.NAMES, "TextDocument:text")[-1].split("\n")
+        paths = any(entity.startswith(f"{variants.VARIANTS}/") and "/path/" in entity for entity in loaded.entities)
+        return debug_blueprint(names, paths=paths), debug_tabs(paths), variants.DEBUG_APPLICATION_ID
+    traced, flags = layout_facts(recording)
+    return default_blueprint(traced, **flags), TAB_ORDER, APPLICATION_ID
 
 
 def layout_facts(recording: Path) -> tuple[list[int], dict[str, bool]]:
@@ -77,14 +93,13 @@ def snapshot(recording: Path, output: Path, *, frame: int = 0, tab: str = "overv
     if shutil.which("ffmpeg") is None:
         print("ffviz: warning: no `ffmpeg` on PATH: the native viewer cannot decode the recording's H.264 frame "
               "streams (Debian: apt-get install ffmpeg); they will show an error", flush=True)
-    index = tab_index(tab)
+    layout, tabs, application_id = recording_layout(recording)
+    index = tab_index(tab, tabs)
     output.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="ffviz-snapshot-") as folder:
-        traced, flags = layout_facts(recording)
-        layout = default_blueprint(traced, **flags)
         layout.root_container.active_tab = index
         rbl = Path(folder) / "layout.rbl"
-        layout.save(APPLICATION_ID, str(rbl))
+        layout.save(application_id, str(rbl))
         port = _free_port()
         env = dict(os.environ, RERUN_ANALYTICS="0")
         log = Path(folder) / "viewer.log"

@@ -27,7 +27,9 @@ from ffviz.recording.view import ViewSize
 from pipeline.results import FrameResult, PathPlan
 from pipeline.runtime.colour import ColourDescription
 
+DEBUG_APPLICATION_ID = "ffviz-debug"  # the debugger's recordings (their layout is their own)
 VARIANTS = "variants"
+NAMES = f"{VARIANTS}/names"  # static text: the variants' names, one a line, in order
 DIFF_RANGE = (0.0, 64.0)  # intensity levels: the output difference's colour range
 PSNR_CAP = 99.0  # dB: an output identical to the default's
 BATCHER = rr.ChunkBatcherConfig(flush_tick=0.5, flush_num_bytes=4 << 20, flush_num_rows=4096)  # live: shows at once
@@ -57,7 +59,7 @@ class VariantRecording:
 
     def __init__(self, path: Path, *, width: int, height: int, fps: float, colour: ColourDescription | None,
                  record_size: int | None, live_url: str | None = None, stream: bool = False) -> None:
-        self._out = RecordingFile(path, application_id="ffviz-debug", batcher=BATCHER, live_url=live_url,
+        self._out = RecordingFile(path, application_id=DEBUG_APPLICATION_ID, batcher=BATCHER, live_url=live_url,
                                   stream=stream)
         self.rec = self._out.rec
         self.stream = self._out.stream  # with ``stream``: what was recorded, to forward (BinaryStream.read)
@@ -82,6 +84,7 @@ class VariantRecording:
             return
         self.names.append(name)
         self.settings[name] = dict(settings)
+        self.rec.log(NAMES, rr.TextDocument("\n".join(self.names)), static=True)  # for the layout, read back
         for entity, (legend, _) in legends.class_legends().items():
             self.rec.log(variant_entity(name, entity), rr.AnnotationContext(legend), static=True)
         self.rec.log(variant_entity(name, "diff/source"), rr.AnnotationContext(CHANGED_LEGEND), static=True)
