@@ -35,7 +35,8 @@ def add_parser(commands: argparse._SubParsersAction, record_size_type: Any, reco
                    help="frames to render (from 0), then exit (default: the interactive debugger)")
     p.add_argument("--set", dest="variants", action="append", type=_settings, default=[], metavar="SETTINGS",
                    help="one variant: SECTION.FIELD=VALUE, several comma-separated (e.g. deblur.alpha=4 or "
-                        "completion.neighbour_frames=2,deblur.alpha=4; a tuple's items joined by +); repeat for more")
+                        "completion.neighbour_frames=2,deblur.alpha=4; a tuple's items joined by +); repeat for more "
+                        "(default: the default only)")
     p.add_argument("--base", type=_settings, default={}, metavar="SETTINGS",
                    help="the session's own settings, every variant's starting point (motion.* and rolling_shutter "
                         "only here) (default: the defaults)")

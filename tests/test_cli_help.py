@@ -32,7 +32,7 @@ def test_every_command_is_listed_with_help():
     (commands,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     listed = {choice.dest: choice.help for choice in commands._choices_actions}
     assert set(listed) == set(COMMANDS) == {"stabilize", "demo", "metrics", "view", "snapshot", "figures", "batch",
-                                            "bench", "compare"}
+                                            "bench", "compare", "debug"}
     assert all(text and text.strip() for text in listed.values()), listed
     assert "thin layer" not in (parser.description or "")
     for action in documented_actions(parser):
