@@ -94,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     from ffviz.compare import add_parser as add_compare_parser
 
     add_compare_parser(commands)
-    from ffviz.bench import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
+    from ffviz.bench.command import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
 
     add_bench_parser(commands)
     return parser
@@ -472,7 +472,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from ffviz.bench import cmd_bench as run_bench
+    from ffviz.bench.command import cmd_bench as run_bench
 
     return run_bench(args)
 

@@ -1,7 +1,7 @@
-"""The results of `ffviz bench`: the rows (BenchRow, which bench.py fills in while it measures), the Markdown
-table, bench.md/csv/json, the plot and the targets block, and the dated report (docs/benchmarks.md in a source
-checkout) that says on what machine and versions they were measured. Imports nothing of bench.py: bench.py
-imports the rows from here."""
+"""The results of `ffviz bench`: the rows (BenchRow, which ffviz/bench/command.py fills in while it measures), the
+Markdown table, bench.md/csv/json, the plot and the targets block, and the dated report (docs/benchmarks.md in a
+source checkout) that says on what machine and versions they were measured. Imports nothing else of the bench: the
+command imports the rows from here."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import datetime
 import json
 import os
 import platform
+import re
 import shutil
 import statistics
 import subprocess
@@ -207,8 +208,9 @@ def write_report(rows: Sequence[BenchRow], path: Path, run: RunInfo, *, clips: S
         "# Benchmarks",
         "",
         f"Written by `ffviz bench` on {now:%Y-%m-%d %H:%M %Z}; every run of `./run bench` (or `ffviz bench`) "
-        "replaces this file. How the benchmark measures: [benchmarking.md](benchmarking.md); earlier measured "
-        "figures: [benchmarks-history.md](benchmarks-history.md).",
+        "replaces this file but for the sections at its end that start with a `<!-- section: NAME -->` marker. How "
+        "the benchmark measures: [benchmarking.md](benchmarking.md); earlier measured figures: "
+        "[benchmarks-history.md](benchmarks-history.md).",
         "",
         "## Machine",
         "",
@@ -236,8 +238,18 @@ def write_report(rows: Sequence[BenchRow], path: Path, run: RunInfo, *, clips: S
         "```",
         "",
     ]
-    path.write_text("\n".join(lines))
+    path.write_text("\n".join(lines) + kept_sections(path))
     return [path, png]
+
+
+SECTION_MARKER = re.compile(r"^<!-- section: ", re.M)  # a line that starts a section written by hand
+
+
+def kept_sections(path: Path) -> str:
+    """What a rewrite of the report at ``path`` keeps at its end: the old file from the first line that starts
+    with a ``<!-- section: NAME -->`` marker on (the decision log's figures, written by hand); "" when none does."""
+    found = SECTION_MARKER.search(path.read_text()) if path.is_file() else None
+    return "" if found is None else "\n" + found.string[found.start():].rstrip() + "\n"
 
 
 # -- targets -------------------------------------------------------------------------------------------------
