@@ -300,7 +300,7 @@ def targets(rows: Sequence[BenchRow]) -> list[str]:
     """The speed targets (issue 24) read off the table, in wall and CPU seconds (medians of the runs): 1. none and
     crop wall <= vid.stab's; 2. full at 640x360 wall <= the OpenCV sample's and CPU <= 1.3x its; 4. full at 1080p
     CPU a frame <= 2x the x264-only transcode's. Target 3 (--quality fast) needs ground truth:
-    benchmarks/fast_preset.py. Peers and ffviz write x264 at CRF 18 (the sample: XVID; the full-mpeg4 row
+    benchmarks/speed/fast_preset.py. Peers and ffviz write x264 at CRF 18 (the sample: XVID; the full-mpeg4 row
     compares it at its own codec, unjudged)."""
     lines = ["speed targets read off this table (wall / CPU seconds; ratio = ffviz / peer; printed, never asserted):"]
     grouped = _by_clip(rows)
@@ -312,8 +312,8 @@ def targets(rows: Sequence[BenchRow]) -> list[str]:
         ("2. full at 640x360: wall <= the OpenCV sample's, CPU <= 1.3x its",
          lambda r: (r.width, r.height) == (640, 360), "no 640x360 clip in this run",
          (("ffviz full", "opencv", 1.0, 1.3), ("ffviz full mpeg4", "opencv", None, None))),
-        ("3. --quality fast: judged on ground truth by benchmarks/fast_preset.py (docs/benchmarks-speed.md)", None, "",
-         ()),
+        ("3. --quality fast: judged on ground truth by benchmarks/speed/fast_preset.py (docs/benchmarks-speed.md)",
+         None, "", ()),
         (f"4. full at 1080p: CPU a frame <= {HD_CPU_BOUND:g}x the x264-only transcode's",
          lambda r: r.height >= HD_ROWS, f"no clip of {HD_ROWS}+ rows in this run",
          (("ffviz full", X264_ONLY, None, HD_CPU_BOUND),)),

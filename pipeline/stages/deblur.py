@@ -40,7 +40,7 @@ from pipeline.stages.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbou
 from pipeline.imaging import INTENSITY_WEIGHTS, intensity
 from pipeline.stages.per_frame import PerFrame
 
-# Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
+# Defaults chosen with benchmarks/quality/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
 # and scale with the frame height (blur, in pixels, grows with the resolution).
 REFERENCE_HEIGHT = 360
 DEBLUR_ALPHA = 8.0
@@ -266,7 +266,7 @@ class StructureGuard:
     cannot tell from aligned), and flat windows whose mean levels differ by over 2 (another flat surface: a
     transfer could not sharpen anything there, only shift its colour). Specks of one cell are then dropped (a 3x3
     opening), so that isolated edge cells of a sharp neighbour do not punch holes in the transfer once dilated.
-    Only windows wholly inside the neighbour's coverage are judged. Thresholds: benchmarks/dynamic_scene.py.
+    Only windows wholly inside the neighbour's coverage are judged. Thresholds: benchmarks/quality/dynamic_scene.py.
 
     Works at the alignment error's resolution (ErrorGrid); the target's statistics are made once per frame.
     """

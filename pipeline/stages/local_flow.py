@@ -17,7 +17,7 @@ matched again by a translation search (``_rescue_large_motions``: DIS's pyramid 
 Why DIS "fast" and not the more accurate "medium": each pixel takes the candidate whose warp best explains its
 surroundings out of four neighbours', and the mosaic fills most of the missing area, so the completed pixels
 hardly depend on flow accuracy while "fast" runs 3x faster. Flow accuracy of every method and the completion
-PSNR behind this choice: docs/completion.md (``benchmarks/local_flow_choice.py``).
+PSNR behind this choice: docs/completion.md (``benchmarks/quality/local_flow_choice.py``).
 """
 
 from __future__ import annotations

@@ -5,14 +5,12 @@ full recording, serves it with `ffviz view` and drives headless Chromium over De
 helpers): frame 0 on screen at open, the last frame after stepping back from frame 0 (the time line wraps
 round) once the stream has loaded, and frame 0 again after stepping forward from the last (nothing dropped).
 Prints the recording's size per frame and the times. Needs chromium and ../shared/videos/vplab_C.avi.
-Usage: python benchmarks/viewer_long_recording.py [--load-wait 150]
+Usage: python -m benchmarks.recording.viewer_long_recording [--load-wait 150]
 """
 
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -20,15 +18,14 @@ from pathlib import Path
 import av
 
 os.environ.setdefault("RERUN_ANALYTICS", "0")
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
+from benchmarks import common  # noqa: E402
 from ffviz.recorder import RerunRecorder  # noqa: E402
 from pipeline.stabilize import StabilizeConfig, stabilize  # noqa: E402
 from pipeline.runtime.video_reader import VideoReader  # noqa: E402
-from test_browser import MATCH_SCORE, WINDOW, match_score, press, screenshot, web_viewer_page  # noqa: E402
 
-CLIP = ROOT.parent / "shared" / "videos" / "vplab_C.avi"
+browser = common.from_tests("test_browser")  # its DevTools helpers: screenshots, key presses, the viewer's page
+CLIP = common.VIDEOS / "vplab_C.avi"
 
 
 def wait_for(devtools, wanted, other, timeout_s: float, key: tuple[str, int] | None = None) -> tuple[float, float]:
@@ -36,16 +33,16 @@ def wait_for(devtools, wanted, other, timeout_s: float, key: tuple[str, int] | N
     started = time.monotonic()
     while True:
         time.sleep(3)
-        shot = screenshot(devtools)
-        score, score_other = match_score(shot, wanted), match_score(shot, other)
-        if (score >= MATCH_SCORE and score > score_other) or time.monotonic() - started > timeout_s:
+        shot = browser.screenshot(devtools)
+        score, score_other = browser.match_score(shot, wanted), browser.match_score(shot, other)
+        if (score >= browser.MATCH_SCORE and score > score_other) or time.monotonic() - started > timeout_s:
             return score, time.monotonic() - started
         if key is not None and int(time.monotonic() - started) % 30 < 3:
-            press(devtools, *key)  # a key pressed while the viewer was busy ingesting may be lost
+            browser.press(devtools, *key)  # a key pressed while the viewer was busy ingesting may be lost
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--load-wait", type=float, default=150.0, help="seconds to let the stream load (default 150)")
     args = parser.parse_args()
     frames = [f.rgb for f in VideoReader(CLIP)]
@@ -67,16 +64,17 @@ def main() -> None:
               f"{time.process_time() - cpu:.0f} s CPU; {rrd.stat().st_size / 1e6:.1f} MB, "
               f"{rrd.stat().st_size / 1e6 / len(sequence):.3f} MB a frame", flush=True)
         first, last = sequence[0], sequence[-1]
-        with web_viewer_page(rrd, folder / "profile") as (devtools, url, navigated):
+        with browser.web_viewer_page(rrd, folder / "profile") as (devtools, url, navigated):
             score, seconds = wait_for(devtools, first, last, 300)
             print(f"frame 0 on screen: score {score:.3f}, {time.monotonic() - navigated:.0f} s after navigation",
                   flush=True)
             time.sleep(args.load_wait)
-            devtools.call("Input.dispatchMouseEvent", type="mouseMoved", x=WINDOW[0] // 2, y=WINDOW[1] // 2)
-            press(devtools, "ArrowLeft", 37)
+            width, height = browser.WINDOW
+            devtools.call("Input.dispatchMouseEvent", type="mouseMoved", x=width // 2, y=height // 2)
+            browser.press(devtools, "ArrowLeft", 37)
             score, seconds = wait_for(devtools, last, first, 240, key=("ArrowLeft", 37))
             print(f"last frame after stepping back from frame 0: score {score:.3f} ({seconds:.0f} s)", flush=True)
-            press(devtools, "ArrowRight", 39)
+            browser.press(devtools, "ArrowRight", 39)
             score, seconds = wait_for(devtools, first, last, 90)
             print(f"frame 0 again after stepping forward from the last: score {score:.3f} ({seconds:.0f} s)",
                   flush=True)

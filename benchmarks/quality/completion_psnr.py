@@ -14,14 +14,13 @@ With --split, each row is followed by the same PSNRs over the pixels our chain f
 warp, fallback: which stage's pixels lose) and the frames where ours loses most against mosaic+telea (a few frames
 usually hold the whole difference). --cases keeps the rows whose name holds one of the given words.
 
-Usage: python benchmarks/completion_psnr.py [--frames 48] [--clips a.mp4,b.avi] [--skip-real] [--skip-speed]
-                                            [--cases astronaut,chelsea] [--split]
-       python benchmarks/completion_psnr.py --flicker ../shared/videos/selh_asb_1.mp4
+Usage: python -m benchmarks.quality.completion_psnr [--frames 48] [--clips a.mp4,b.avi] [--skip-real] [--skip-speed]
+                                                   [--cases astronaut,chelsea] [--split]
+       python -m benchmarks.quality.completion_psnr --flicker ../shared/videos/selh_asb_1.mp4
 """
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import itertools
 import pstats
@@ -32,6 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks import common
 from pipeline import geometry
 from pipeline.stages import completion
 from pipeline.runtime.observer import NullObserver
@@ -43,7 +43,7 @@ from pipeline.runtime.source import ArraySource, FileSource, one_pass
 from pipeline.stabilize import StabilizeConfig, stabilize_source
 from pipeline.evaluation.synthetic import SyntheticConfig, generate
 
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
 SYNTHETIC = (("coffee", 1), ("coffee", 2), ("astronaut", 3), ("chelsea", 4), ("rocket", 5))
 REAL = ("linyihaolyh_shaky.mp4", "vplab_C.avi", "selh_tasc.mp4", "sudheerachary_small-shaky-5.avi")
 
@@ -72,8 +72,8 @@ def _row(name: str, scores: CompletionScores, seconds: float, split: bool = Fals
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=48)
+    parser = common.parser(__doc__)
+    common.add_frames(parser, 48, "frames of each case")
     parser.add_argument("--clips", default=",".join(REAL))
     parser.add_argument("--skip-real", action="store_true")
     parser.add_argument("--skip-speed", action="store_true")

@@ -14,14 +14,13 @@ Printed per configuration (blurred / sharp frames separately):
   ms       median time of deblurring one frame: with the neighbours completion already warped (full mode), and
            warping its sharper neighbours itself (--mode none/crop); blurriness over the window included
 
-Usage: python benchmarks/deblur_psnr.py [--sweep] [--placement] [--images coffee,astronaut] [--seeds 0,1]
+Usage: python -m benchmarks.quality.deblur_psnr [--sweep] [--placement] [--images coffee,astronaut] [--seeds 0,1]
   --sweep      the alpha / rejection / min-ratio tables the defaults were chosen from
   --placement  deblurring after completion (what the orchestrator does) vs before it, on the completed frame
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -29,6 +28,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from benchmarks import common
 from pipeline.stages import completion, deblur, warping
 from pipeline.evaluation import synthetic
 from pipeline.stages.neighbours import WarpedNeighbour, warp_neighbours
@@ -199,7 +199,7 @@ def placement(all_cases: list[Case]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--images", default="coffee,astronaut,chelsea")
     parser.add_argument("--seeds", default="0,1")
     parser.add_argument("--sweep", action="store_true")

@@ -9,12 +9,11 @@ Per clip, from the pipeline's own stage results while it writes the output:
 - ``x-cut``: neighbours handed to completion (mosaic and local warp) from another shot (must be 0);
 then the written file is probed: frame count, size and frame rate against the input's.
 
-Usage: python benchmarks/full_mode_clips.py [--out DIR] [CLIPS...]   (default: every clip in ../shared/videos)
+Usage: python -m benchmarks.quality.full_mode_clips [--out DIR] [CLIPS...]   (default: every clip in ../shared/videos)
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 import time
@@ -22,12 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import common
 from pipeline.stages import completion
 from pipeline.runtime import video_reader
 from pipeline.runtime.observer import NullObserver
 from pipeline.stabilize import StabilizeConfig, stabilize
 
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
 DARK = 0  # exactly black in every channel: what an unfilled missing pixel looks like
 
 
@@ -65,7 +65,7 @@ class _FullModeAudit(NullObserver):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("clips", nargs="*", type=Path)
     parser.add_argument("--out", type=Path, help="keep the outputs here (default: a temporary folder)")
     args = parser.parse_args(argv)

@@ -7,37 +7,29 @@ first a warm-up), to a recorder without its own thread, so that all the CPU time
 the pipeline left them (the full-frame flow views the recorder asks for are made again). A profile of one more
 replay splits the recorder's own thread's CPU time among H.264 encoding, PNG/JPEG encoding and the rest.
 Writes its section of docs/benchmarks-recording.md (--no-report: print only).
-Usage: python benchmarks/recorder_cpu.py [--clip ../shared/videos/vplab_C.avi] [--first 200] [--frames 40]
-       [--repeats 3]
+Usage: python -m benchmarks.recording.recorder_cpu [--clip ../shared/videos/vplab_C.avi] [--first 200] [--frames 40]
+       [--repeat 3] [--report docs/benchmarks-recording.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import os
 import pstats
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 os.environ.setdefault("RERUN_ANALYTICS", "0")
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import rerun as rr  # noqa: E402
 
-from ffviz.recorder import H264_OPTIONS, RerunRecorder  # noqa: E402
+from benchmarks import common  # noqa: E402
+from ffviz.recorder import RerunRecorder  # noqa: E402
+from ffviz.recording.encoders import H264_OPTIONS  # noqa: E402
 from pipeline.runtime.observer import Observers  # noqa: E402
 from pipeline.stabilize import StabilizeConfig, stabilize  # noqa: E402
-from speed_report import machine_line, write_section  # noqa: E402
-
-REPORT = Path(__file__).resolve().parents[1] / "docs" / "benchmarks-recording.md"
-HEADER = """# Recording benchmarks (issue 22)
-
-Each section is written by the benchmark script it names; rerun it to regenerate the section.
-"""
 
 
 class Keep:
@@ -45,6 +37,9 @@ class Keep:
 
     def __init__(self, first: int, frames: int) -> None:
         self.first, self.frames, self.events = first, frames, []
+
+    def keep(self, result):
+        return result  # every intermediate, so that a replaying recorder makes its own digest of each frame
 
     def __getattr__(self, name: str):
         if not name.startswith("on_"):
@@ -102,17 +97,18 @@ def split(profile: cProfile.Profile, frames: int) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clip", type=Path, default=Path("../shared/videos/vplab_C.avi"))
-    parser.add_argument("--first", type=int, default=200)
-    parser.add_argument("--frames", type=int, default=40)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--no-report", action="store_true")
+    parser = common.parser(__doc__)
+    common.add_clip(parser, common.VIDEOS / "vplab_C.avi")
+    parser.add_argument("--first", type=int, default=200, help="the first frame replayed (default: %(default)s)")
+    common.add_frames(parser, 40, "frames replayed")
+    common.add_repeat(parser, 3, "--repeats")
+    common.add_report(parser, common.RECORDING_REPORT)
     args = parser.parse_args()
     if not args.clip.is_file():
         raise SystemExit(f"{args.clip}: no such clip")
     lines = [f"## recorder_cpu.py: `--record full` CPU per frame, {args.clip.name} frames {args.first}-"
-             f"{args.first + args.frames - 1}", "", machine_line() + f"; rerun-sdk {rr.__version__}, x264 preset "
+             f"{args.first + args.frames - 1}", "",
+             common.machine_line() + f"; rerun-sdk {rr.__version__}, x264 preset "
              f"{H264_OPTIONS['preset']}", ""]
     with tempfile.TemporaryDirectory(prefix="ffviz-recorder-cpu-") as tmp:
         folder = Path(tmp)
@@ -122,7 +118,7 @@ def main() -> None:
         size = (folder / "full.rrd").stat().st_size
         frames = sum(1 for name, _ in keep.events if name == "on_frame")
         replay(keep.events, folder)  # warm-up
-        runs = [replay(keep.events, folder) * 1000 / frames for _ in range(args.repeats)]
+        runs = [replay(keep.events, folder) * 1000 / frames for _ in range(args.repeat)]
         profile = cProfile.Profile(time.thread_time)
         replay(keep.events, folder, profile)
     lines += [f"- full recording of all {report.n_frames} frames: {size / 1e6:.1f} MB, "
@@ -131,13 +127,7 @@ def main() -> None:
               f"(runs: {', '.join(f'{r:.1f}' for r in runs)})",
               "- of which, on the recorder's thread (one profiled replay; the profiler adds its own cost):"]
     lines += [f"  - {part}: {ms:.1f} ms a frame" for part, ms in split(profile, frames).items()]
-    if args.no_report:
-        print("\n".join(lines))
-        return
-    if not REPORT.is_file():
-        REPORT.write_text(HEADER)
-    print(f"wrote {write_section('recorder_cpu', chr(10).join(lines), REPORT)}")
-    print("\n".join(lines))
+    common.publish("recorder_cpu", lines, common.report_path(args), common.RECORDING_HEADER)
 
 
 if __name__ == "__main__":

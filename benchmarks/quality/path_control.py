@@ -7,21 +7,23 @@ residual jitter (px, deg; lower is steadier), the cropping ratio (Liu et al.: th
 input, 1/s, averaged over the frames; 0.9 is a 10 % crop each way, 81 % of the area) and the share of black
 pixels. ffviz's rows also print the area its plan kept (the crop window's scale squared, averaged).
 
-Usage: nice -n 10 python benchmarks/path_control.py [CLIP ...] [--report FILE] [--frames N]
+Usage: nice -n 10 python -m benchmarks.quality.path_control [CLIP ...] [--frames N]
+       [--report [docs/benchmarks-path-control.md]]   (--report: also write the table as its section of the report)
 """
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from benchmarks import common
 from pipeline.evaluation import metrics
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "videos"
+SHARED = common.VIDEOS
+REPORT = common.DOCS / "benchmarks-path-control.md"
 DEFAULT_CLIPS = ("sudheerachary_small-shaky-5.avi", "vplab_C.avi", "zhangyilang_03_input.avi")
 
 # (label, ffviz options, the vid.stab options that match it or None)
@@ -81,10 +83,10 @@ def run_vidstab(clip: Path, out: Path, detect: str, transform: str, work: Path) 
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("clips", nargs="*", type=Path, help="videos (default: three shared clips)")
-    parser.add_argument("--frames", type=int, default=None, help="only the first N frames of each clip")
-    parser.add_argument("--report", type=Path, help="also write the table as markdown here")
+    common.add_frames(parser, None)
+    common.add_report(parser, REPORT, by_default=False)
     args = parser.parse_args()
     clips = args.clips or [SHARED / name for name in DEFAULT_CLIPS if (SHARED / name).exists()]
     header = ["| clip | method | jitter px | jitter deg | cropping | black | planned area | run s |",
@@ -118,17 +120,19 @@ def main() -> None:
                             f"| {m.cropping_ratio:.3f} | {m.black_fraction:.3f} | {planned} | {seconds:.0f} |")
                 print(rows[-1], flush=True)
             lines += rows
-    if args.report:
+    report = common.report_path(args)
+    if report is not None:
         note = f" (first {args.frames} frames of each clip)" if args.frames else ""
-        args.report.write_text(
-            "# Path control beside vid.stab\n\nWritten by `benchmarks/path_control.py`" + note + ". Crop mode "
-            "(`--mode crop --no-deblur`); vid.stab two-pass with the options shown. Jitter: residual high-frequency "
-            "motion of the frame centre (docs/metrics.md; lower is steadier; a zoom about the centre does not move "
-            "it). Cropping: Liu et al.'s cropping ratio, the output's scale against the input measured from the videos "
-            "(1: nothing cropped; 0.9: 10 % each way). Black: share of black pixels (none anywhere: vid.stab's default "
-            "crop=keep fills the borders optzoom=0 uncovers with earlier frames' pixels). Planned area: the share of the frame area ffviz's crop windows kept, averaged over "
-            "the frames. Run s: wall seconds on a shared 2-core machine (noisy; not a speed comparison).\n\n"
-            + "\n".join(lines) + "\n")
+        body = ("# Path control beside vid.stab\n\nWritten by `benchmarks/quality/path_control.py`" + note + ". Crop "
+                "mode (`--mode crop --no-deblur`); vid.stab two-pass with the options shown. Jitter: residual "
+                "high-frequency motion of the frame centre (docs/metrics.md; lower is steadier; a zoom about the "
+                "centre does not move it). Cropping: Liu et al.'s cropping ratio, the output's scale against the input "
+                "measured from the videos (1: nothing cropped; 0.9: 10 % each way). Black: share of black pixels (none "
+                "anywhere: vid.stab's default crop=keep fills the borders optzoom=0 uncovers with earlier frames' "
+                "pixels). Planned area: the share of the frame area ffviz's crop windows kept, averaged over the "
+                "frames. Run s: wall seconds on a shared 2-core machine (noisy; not a speed comparison).\n\n"
+                + "\n".join(lines))
+        print(f"wrote {common.write_section('path_control', body, report)}")
 
 
 if __name__ == "__main__":

@@ -8,23 +8,24 @@ fitted readout time (auto), and the output's wobble: the mean squared residual (
 similarity fitted to the inlier tracks between consecutive output frames (rolling_shutter.readout_misfit at
 readout 0: what no global-shutter camera motion explains; parallax and moving things add to it too).
 
-Usage: nice -n 10 python benchmarks/robust_motion.py [CLIP ...] [--report docs/benchmarks-robust-motion.md]
-(CLIPs given: those only, no synthetic ones)
+Usage: nice -n 10 python -m benchmarks.quality.robust_motion [CLIP ...] [--report [docs/benchmarks-robust-motion.md]]
+(CLIPs given: those only, no synthetic ones; --report: also write the table as its section of the report)
 """
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 from pathlib import Path
 
+from benchmarks import common
 from pipeline.evaluation import metrics, synthetic
 from pipeline.runtime.observer import NullObserver, null_progress
 from pipeline.runtime.source import FileSource
 from pipeline.stabilize import StabilizeConfig, estimate_motion, stabilize
 from pipeline.stages import motion, rolling_shutter
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "videos"
+SHARED = common.VIDEOS
+REPORT = common.DOCS / "benchmarks-robust-motion.md"
 DEFAULT_CLIPS = ("vplab_C.avi", "zhangyilang_03_input.avi", "selh_asb_1.mp4", "lohoi_test_eric_vid_original.mp4",
                  "selh_tasc.mp4")
 # A box (x, y, w, h, full-resolution px) around the moving person for the whole clip, read off frames 0, 120, 240
@@ -61,9 +62,9 @@ def synthetic_clips(folder: Path) -> list[Path]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("clips", nargs="*", type=Path, help="videos (default: two synthetic and the shared clips)")
-    parser.add_argument("--report", type=Path, help="also write the table as markdown here")
+    common.add_report(parser, REPORT, by_default=False)
     args = parser.parse_args()
     lines = ["| clip | option | jitter px | jitter deg | kept | readout | wobble px² |",
              "|---|---|---|---|---|---|---|"]
@@ -95,16 +96,17 @@ def main() -> None:
                 print(line, flush=True)
             lines.append(f"| {clip.name} | (input) | | | | | {wobble(clip):.3f} |")
             print(lines[-1], flush=True)
-    if args.report:
-        args.report.write_text(
-            "# Robust camera motion: --ignore and --rolling-shutter on the shared clips\n\n"
-            "Written by `benchmarks/robust_motion.py` (--mode crop). Jitter: pipeline/evaluation/metrics.py "
-            "(docs/metrics.md); kept: the crop's share of the frame; readout: the fitted readout time (fraction "
-            "of the frame interval); wobble: mean squared residual of a similarity on the inlier tracks between "
-            "consecutive frames, in input px² (what no global-shutter camera motion explains; parallax and moving "
-            "objects add to it), the input's on its own row. The synthetic clips are rendered by "
-            "pipeline/evaluation/synthetic.py under the same shake, row by row with readout 0.9 and all at once."
-            "\n\n" + "\n".join(lines) + "\n")
+    report = common.report_path(args)
+    if report is not None:
+        body = ("# Robust camera motion: --ignore and --rolling-shutter on the shared clips\n\n"
+                "Written by `benchmarks/quality/robust_motion.py` (--mode crop). Jitter: "
+                "pipeline/evaluation/metrics.py (docs/metrics.md); kept: the crop's share of the frame; readout: the "
+                "fitted readout time (fraction of the frame interval); wobble: mean squared residual of a similarity "
+                "on the inlier tracks between consecutive frames, in input px² (what no global-shutter camera motion "
+                "explains; parallax and moving objects add to it), the input's on its own row. The synthetic clips "
+                "are rendered by pipeline/evaluation/synthetic.py under the same shake, row by row with readout 0.9 "
+                "and all at once.\n\n" + "\n".join(lines))
+        print(f"wrote {common.write_section('robust_motion', body, report)}")
 
 
 if __name__ == "__main__":

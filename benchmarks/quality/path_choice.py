@@ -11,19 +11,17 @@ Ground truth (pipeline.evaluation.synthetic, full mode): the output centre's res
 missing share and the completion PSNR of the synthesized pixels. Then the L1 program's CPU seconds on a
 1000-frame shaken camera (median of 3), full and crop.
 
-Usage: nice -n 10 python benchmarks/path_choice.py [--clips a.mp4,b.avi] [--frames N] [--skip-real] [--skip-truth]
-       [--only TEXT] [--cache FILE] [--merge FILE ...] [--report docs/benchmarks-paths.md]
+Usage: nice -n 10 python -m benchmarks.quality.path_choice [--clips a.mp4,b.avi] [--frames N] [--skip-real]
+       [--skip-truth] [--only TEXT] [--cache FILE] [--merge FILE ...] [--report [docs/benchmarks-paths.md]]
 (docs/benchmarks-paths.md: --frames 150, the clips split over two runs at once and merged with --merge.)
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,6 +29,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from benchmarks import common
+from benchmarks.quality.path_control import trimmed
 from pipeline.chain import plan_path
 from pipeline.config import StabilizeConfig
 from pipeline.evaluation import metrics
@@ -43,10 +43,8 @@ from pipeline.stabilize import estimate_motion, stabilize
 from pipeline.stages import l1_path, smoothing
 from pipeline.stages.adaptive_crop import CropConfig
 
-from path_control import trimmed  # benchmarks/ is on sys.path when a script in it runs
-
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "videos"
+SHARED = common.VIDEOS
+REPORT = common.DOCS / "benchmarks-paths.md"
 DEFAULT_CLIPS = ("linyihaolyh_shaky.mp4", "sudheerachary_small-shaky-5.avi", "selh_asb_1.mp4", "vplab_C.avi",
                  "zhangyilang_03_input.avi", "selh_tasc.mp4")
 MARGINS = (0.03, 0.04, 0.05)  # full mode on the real clips: the L1 translation margin, fraction of the longer side
@@ -166,9 +164,7 @@ def truth_rows(cache: dict, n_frames: int = 48, seeds: tuple[int, ...] = (0, 1),
 def solve_seconds(cache: dict) -> None:
     if "solve" in cache:
         return
-    sys.path.insert(0, str(ROOT / "tests"))
-    from test_l1_path import shaken_camera  # the ground-truth camera of the tests, 1000 frames
-
+    shaken_camera = common.from_tests("test_l1_path").shaken_camera  # the tests' ground-truth camera, 1000 frames
     _, _, curr_from_prev = shaken_camera(1000, seed=3, piece=333)
     out = {}
     for label, config in (("full", l1_path.L1PathConfig()), ("crop", l1_path.L1PathConfig(crop_scale=0.85))):
@@ -187,7 +183,7 @@ ORDER = ("input", "vid.stab", *(label for label, *_ in VARIANTS))
 
 def report(cache: dict, frames: int | None) -> str:
     lines = ["# Camera paths: eq. 18 against the L1 program, and beside vid.stab", "",
-             "Written by `benchmarks/path_choice.py` (its docstring says how each figure is measured). Jitter: "
+             "Written by `benchmarks/quality/path_choice.py` (its docstring says how each figure is measured). Jitter: "
              "residual high-frequency motion of the frame centre (px, deg; docs/metrics.md), lower is steadier; "
              "x vid.stab: jitter px against vid.stab's (two-pass defaults, crop) on the same clip. Missing: the "
              "mean share of output pixels no input pixel covers (what full mode completes). Plan CPU s: planning "
@@ -223,16 +219,16 @@ def report(cache: dict, frames: int | None) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--clips", default=",".join(DEFAULT_CLIPS))
-    parser.add_argument("--frames", type=int, default=None, help="only the first N frames of each clip")
+    common.add_frames(parser, None)
     parser.add_argument("--skip-real", action="store_true")
     parser.add_argument("--skip-truth", action="store_true")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "path_choice.json",
                         help="rows measured so far (a rerun measures only what is missing)")
     parser.add_argument("--only", default="", help="measure only the rows whose label holds this text")
     parser.add_argument("--merge", type=Path, nargs="*", default=[], help="other runs' caches to add")
-    parser.add_argument("--report", type=Path, default=None)
+    common.add_report(parser, REPORT, by_default=False)
     args = parser.parse_args()
     cache = json.loads(args.cache.read_text()) if args.cache.exists() else {}
     for extra in args.merge:  # rows measured by other runs of this script (e.g. on other clips at the same time)
@@ -257,8 +253,8 @@ def main() -> None:
     save()
     text = report(cache, args.frames)
     print(text)
-    if args.report:
-        args.report.write_text(text)
+    if common.report_path(args) is not None:
+        print(f"wrote {common.write_section('path_choice', text, common.report_path(args))}")
 
 
 if __name__ == "__main__":

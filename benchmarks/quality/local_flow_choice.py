@@ -8,7 +8,7 @@ Two kinds of truth, both 640x360:
 EPE (end-point error, px) on LocalFlowResult.common: mean over everything, background only, the object's interior
 only; ms per frame pair (median of repeats, including grey conversion and filling).
 A second table compares ways of filling the invalid pixels before DIS, measured near the invalid areas.
-Usage: python benchmarks/local_flow_choice.py
+Usage: python -m benchmarks.quality.local_flow_choice
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import time
 import cv2
 import numpy as np
 
+from benchmarks import common
 from pipeline.evaluation import synthetic
 from pipeline.stages.local_flow import LocalFlowConfig, fill_invalid, local_flow
 from pipeline.stages.warping import warp, warp_frame
@@ -109,7 +110,8 @@ def epe(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
     return float(np.linalg.norm(estimate - truth, axis=-1)[mask].mean()) if mask.any() else float("nan")
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    common.parser(__doc__).parse_args(argv)  # no options: --help describes the script
     rng = np.random.default_rng(0)
     photo_cases = [photo_case(name, rng) for name in ("astronaut", "coffee", "chelsea", "rocket") for _ in range(2)]
     video = synthetic.generate(synthetic.SyntheticConfig(n_frames=40, blurred_frames=(), seed=1))
@@ -138,7 +140,7 @@ def main() -> int:
     for fill in ("other, then push-pull", "push-pull", "black (none)"):
         near_epe, far_epe = [], []
         for target, tv, neighbour, nv, truth, _ in photo_cases:
-            common = local_flow(target, tv, neighbour, nv, config).common
+            in_both = local_flow(target, tv, neighbour, nv, config).common
             if fill == "other, then push-pull":  # what local_flow does
                 flow = local_flow(target, tv, neighbour, nv, config).flow
             else:  # pre-filled (or left black) and declared valid, so local_flow fills nothing
@@ -147,8 +149,8 @@ def main() -> int:
                 everywhere = np.ones_like(tv)
                 flow = local_flow(first, everywhere, second, everywhere, config).flow
             near = cv2.distanceTransform(tv.astype(np.uint8), cv2.DIST_L2, 5) < 24
-            near_epe.append(epe(flow, truth, common & near))
-            far_epe.append(epe(flow, truth, common & ~near))
+            near_epe.append(epe(flow, truth, in_both & near))
+            far_epe.append(epe(flow, truth, in_both & ~near))
         print(f"{fill:25s} {np.mean(near_epe):17.3f} {np.mean(far_epe):9.3f}", flush=True)
     return 0
 

@@ -1,7 +1,7 @@
 """Batch throughput of `ffviz batch` on Ray: videos per minute at 1, 2, ... workers on this machine.
 
-    .venv/bin/python benchmarks/batch_throughput.py [--clips 4] [--frames 30] [--size 320x180] [--mode full]
-                                                     [--workers 1,2] [--address ADDR]
+    .venv/bin/python -m benchmarks.speed.batch_throughput [--clips 4] [--frames 30] [--size 320x180] [--mode full]
+                                                           [--workers 1,2] [--address ADDR]
 
 Synthetic clips are generated once into a temp folder; each worker count gets a fresh local Ray
 instance with that many CPUs (or, with --address, the cluster with --jobs capping concurrency) and a fresh
@@ -10,20 +10,20 @@ output folder. Ray's start-up is not counted; each figure is the wall time of ru
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
 
+from benchmarks import common
 from ffviz import batch
 from pipeline import stabilize as stab
 from pipeline.evaluation import synthetic
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clips", type=int, default=4)
-    parser.add_argument("--frames", type=int, default=30)
+    parser = common.parser(__doc__)
+    parser.add_argument("--clips", type=int, default=4, help="synthetic clips made (default: %(default)s)")
+    common.add_frames(parser, 30, "frames of each clip")
     parser.add_argument("--size", default="320x180")
     parser.add_argument("--mode", choices=stab.OUTPUT_MODES, default="full")
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts")

@@ -3,34 +3,31 @@
 The clip: the first --frames frames of a shared 640x360 clip upscaled to 1920x1080 by ffmpeg (Lanczos, x264 CRF 16
 preset fast), and a second one --frames x 3 long, so that peak memory can be compared across lengths (x264's
 lookahead, 40 frames at preset medium, and ffviz's frame window fill up over the first few dozen frames). Each command
-runs as its own child process, measured from outside as `ffviz bench` measures (ffviz/bench.py run_measured: wall
-and CPU seconds of the process tree, peak RSS from wait4), --repeat times, medians, after one unmeasured run of each
-on the shorter clip (numba's kernels compiled into their cache, the clips in the page cache). The transcode: ffmpeg decoding
-the clip and encoding it with libx264 CRF 18 preset medium, ffviz's default encoder settings. Then each mode's
-CPU ms a frame per stage on the shorter clip (`ffviz bench --profile`'s measurement, ffviz/bench_profile.py,
+runs as its own child process, measured from outside as `ffviz bench` measures (ffviz/bench/measure.py run_measured:
+wall and CPU seconds of the process tree, peak RSS from wait4), --repeat times, medians, after one unmeasured run of
+each on the shorter clip (numba's kernels compiled into their cache, the clips in the page cache). The transcode: ffmpeg
+decoding the clip and encoding it with libx264 CRF 18 preset medium, ffviz's default encoder settings. Then each mode's
+CPU ms a frame per stage on the shorter clip (`ffviz bench --profile`'s measurement, ffviz/bench/profile.py,
 without the recording run).
 
-Usage: python benchmarks/speed_1080p.py [--clip ../shared/videos/vplab_C.avi] [--frames 40] [--repeat 1]
+Usage: python -m benchmarks.speed.speed_1080p [--clip ../shared/videos/vplab_C.avi] [--frames 40] [--repeat 1]
        [--modes full,crop,none] [--report docs/benchmarks-speed.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import statistics
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-from ffviz import bench_profile
-from ffviz.bench import ffviz_command, run_measured
+from benchmarks import common
+from ffviz.bench import profile as bench_profile
+from ffviz.bench.measure import run_measured
+from ffviz.bench.methods import ffviz_command
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import speed_report  # noqa: E402  (benchmarks/ is not a package)
-
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
 X264 = ["-fps_mode", "passthrough", "-c:v", "libx264", "-preset", "medium", "-crf", "18"]
 
 
@@ -50,19 +47,18 @@ def commands(clip: Path, modes: list[str], work: Path) -> dict[str, list[str]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clip", type=Path, default=VIDEOS / "vplab_C.avi")
-    parser.add_argument("--frames", type=int, default=40)
-    parser.add_argument("--repeat", type=int, default=1)
-    parser.add_argument("--modes", default="full,crop,none")
-    parser.add_argument("--no-profile", action="store_true")
-    parser.add_argument("--report", type=Path, default=speed_report.REPORT)
-    parser.add_argument("--no-report", action="store_true")
+    parser = common.parser(__doc__)
+    common.add_clip(parser, VIDEOS / "vplab_C.avi")
+    common.add_frames(parser, 40, "the shorter clip's frames (the longer one has three times as many)")
+    common.add_repeat(parser, 1)
+    parser.add_argument("--modes", default="full,crop,none", help="ffviz modes, comma-separated (default: %(default)s)")
+    parser.add_argument("--no-profile", action="store_true", help="leave out the per-stage table")
+    common.add_report(parser, common.SPEED_REPORT)
     args = parser.parse_args(argv)
     if not args.clip.is_file() or shutil.which("ffmpeg") is None:
         print(f"{args.clip} or ffmpeg not found: nothing measured")
         return 0
-    started = speed_report.machine_line()
+    started = common.machine_line()
     modes = args.modes.split(",")
     lengths = (args.frames, 3 * args.frames)
     runs: dict[tuple[str, int], list] = {}
@@ -99,7 +95,8 @@ def main(argv: list[str] | None = None) -> int:
 
     x264_ms = marginal_ms("x264 transcode")
     lines = ["## 1080p: ffviz against the x264 transcode (target 4)", "",
-             f"Written by `benchmarks/speed_1080p.py` ({started}; --repeat {args.repeat}, medians). The clip: the "
+             f"Written by `benchmarks/speed/speed_1080p.py` ({started}; --repeat {args.repeat}, medians). The clip: "
+             "the "
              f"first {short} and {long} frames of {args.clip.name} upscaled to 1920x1080. Whole commands "
              "as `ffviz bench` measures them (wall and CPU s of the process tree, peak RSS); the transcode is "
              "ffmpeg's decode + libx264 CRF 18 preset medium, ffviz's default encoder settings. CPU a frame: the "
@@ -123,10 +120,10 @@ def main(argv: list[str] | None = None) -> int:
     lines += [f"Peak RSS at {long} frames over {short}: "
               + ", ".join(f"{mode} {g:.2f}x" for mode, g in zip(modes, growth)) + " (flat: about 1x)."]
     if profiles:
-        lines += ["", f"Each stage's CPU ms a frame at 1080p ({short} frames; ffviz/bench_profile.py: one worker "
+        lines += ["", f"Each stage's CPU ms a frame at 1080p ({short} frames; ffviz/bench/profile.py: one worker "
                       "in process, OpenCV's threads off, no recording run):", "", bench_profile.table_header(),
                   *(profile.line() for profile in profiles)]
-    speed_report.publish("1080p", lines, None if args.no_report else args.report)
+    common.publish("1080p", lines, common.report_path(args), common.SPEED_HEADER)
     return 0
 
 

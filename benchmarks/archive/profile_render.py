@@ -5,17 +5,17 @@ completion and deblurring both work as on a real clip. Prints frames/s for each 
 with one per core (after a warm-up run that compiles the numba kernels), then a cProfile of one full-mode run: the pipeline's own functions by
 cumulative time. Used for the before/after figures of issue 6 (docs/benchmarks-history.md).
 
-Usage: python benchmarks/profile_render.py [--size 640x360] [--frames 40] [--modes none,crop,full] [--top 30]
+Usage: python -m benchmarks.archive.profile_render [--size 640x360] [--frames 40] [--modes none,crop,full] [--top 30]
 """
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import pstats
 import sys
 import time
 
+from benchmarks import common
 from pipeline.runtime.parallel import default_workers
 from pipeline.runtime.source import ArraySource
 from pipeline.stabilize import StabilizeConfig, stabilize_source
@@ -23,9 +23,9 @@ from pipeline.evaluation.synthetic import SyntheticConfig, generate
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--size", default="640x360")
-    parser.add_argument("--frames", type=int, default=40)
+    common.add_frames(parser, 40, "frames of the synthetic clip")
     parser.add_argument("--modes", default="none,crop,full")
     parser.add_argument("--top", type=int, default=30)
     parser.add_argument("--no-profile", action="store_true")

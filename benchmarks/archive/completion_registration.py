@@ -13,13 +13,12 @@ Columns:
                 (deblurring on, as a user runs it) of the first FRAMES frames of each shared clip, before / after
   CPU s         process CPU seconds of that full-mode run (threads included; the machine is shared, so indicative)
 
-Usage: python benchmarks/completion_registration.py [--frames 240] [--clips a.mp4,...] [--skip-psnr]
-       [--report docs/benchmarks-completion.md]
+Usage: python -m benchmarks.archive.completion_registration [--frames 240] [--clips a.mp4,...] [--skip-psnr]
+       [--report [docs/benchmarks-completion.md]]   (--report: also write the tables as its section of the report)
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import datetime
 import itertools
@@ -29,6 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks import common
 from pipeline.config import StabilizeConfig
 from pipeline.evaluation import metrics
 from pipeline.evaluation.completion import completion_scores, crop_completion_scores, jittered_crop
@@ -38,7 +38,8 @@ from pipeline.stabilize import stabilize
 from pipeline.stages.completion import CompletionConfig
 from pipeline.stages.smoothing import SmoothingConfig
 
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
+REPORT = common.DOCS / "benchmarks-completion.md"
 FLICKER_CLIPS = ("selh_asb_1.mp4", "linyihaolyh_shaky.mp4", "selh_tasc.mp4", "vplab_C.avi", "selh_shaky_1.mp4",
                  "dfkimera_shaky.mp4")
 CROP_CLIPS = ("linyihaolyh_shaky.mp4", "vplab_C.avi", "selh_tasc.mp4", "sudheerachary_small-shaky-5.avi")
@@ -95,24 +96,25 @@ def flicker_rows(clips: list[str], n_frames: int, emit) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=240, help="frames of each shared clip for the flicker runs")
+    parser = common.parser(__doc__)
+    common.add_frames(parser, 240, "frames of each shared clip for the flicker runs")
     parser.add_argument("--psnr-frames", type=int, default=32, help="frames of each ground-truth case")
     parser.add_argument("--clips", default=",".join(FLICKER_CLIPS))
     parser.add_argument("--skip-psnr", action="store_true")
     parser.add_argument("--skip-flicker", action="store_true")
-    parser.add_argument("--report", type=Path, help="also write the tables as markdown to this file")
+    common.add_report(parser, REPORT, by_default=False)
     args = parser.parse_args(argv)
+    report = common.report_path(args)
     lines = [f"# Completion: local registration and the static fill, before / after", "",
-             f"Written by `benchmarks/completion_registration.py` on "
+             f"Written by `benchmarks/archive/completion_registration.py` on "
              f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC ({platform.machine()}, Python "
              f"{platform.python_version()}). Columns: see the script's docstring.", ""]
 
     def emit(*rows: str) -> None:  # print, and rewrite the report so far (a long run keeps what it measured)
         print("\n".join(rows), flush=True)
         lines.extend(rows)
-        if args.report is not None:
-            args.report.write_text("\n".join(lines) + "\n")
+        if report is not None:
+            common.write_section("completion_registration", "\n".join(lines), report)
 
     if not args.skip_flicker:
         emit("| clip | frames | flicker before / after | CPU s before / after |", "|---|---|---|---|")

@@ -3,18 +3,18 @@ memory, side by side, at 640x360, 1080x1920 and 2160x3840 (and, with --long, 100
 
 The large inputs are a shared clip centre-cropped to the aspect and scaled with Lanczos (as
 ../shared/tools/phone-clips.sh makes them), made once into --work. Each run is its own child process measured from
-outside as `ffviz bench` measures (ffviz.bench.run_measured: CPU seconds of the process tree, peak RSS from wait4),
-plain and recorded in turn, --repeat times; the table shows medians. The bounds are issue 39's: the recording adds at
-most 30 % CPU at 640x360 and 1080p, and at most max(25 %, 600 MB) to the peak at every size. Writes its section of
-docs/benchmarks-recording.md (--no-report: print only).
+outside as `ffviz bench` measures (ffviz.bench.measure.run_measured: CPU seconds of the process tree, peak RSS from
+wait4), plain and recorded in turn, --repeat times; the table shows medians. The bounds are issue 39's: the
+recording adds at most 30 % CPU at 640x360 and 1080p, and at most max(25 %, 600 MB) to the peak at every size.
+Writes its section of docs/benchmarks-recording.md (--no-report: print only).
 
-Usage: python benchmarks/recording_cost.py [--clip ../shared/videos/dfkimera_shaky.mp4] [--frames 120]
+Usage: python -m benchmarks.recording.recording_cost [--clip ../shared/videos/dfkimera_shaky.mp4] [--frames 120]
        [--sizes 640x360,1080x1920,2160x3840] [--long] [--repeat 1] [--record-size 960] [--work bench_out/recording]
+       [--report docs/benchmarks-recording.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 from fractions import Fraction
@@ -23,13 +23,11 @@ from pathlib import Path
 import av
 import cv2
 
-from ffviz.bench import ffviz_command, run_measured
+from benchmarks import common
+from ffviz.bench.measure import run_measured
+from ffviz.bench.methods import ffviz_command
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from speed_report import machine_line, write_section  # noqa: E402  (benchmarks/ is not a package)
-
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
-REPORT = Path(__file__).resolve().parents[1] / "docs" / "benchmarks-recording.md"
+VIDEOS = common.VIDEOS
 CPU_BOUND = 1.30  # at 640x360 and 1080p
 PEAK_SHARE, PEAK_FLOOR_MB = 0.25, 600.0
 CPU_BOUNDED_PIXELS = 1920 * 1080  # the CPU bound holds up to 1080p
@@ -94,22 +92,22 @@ def row(name: str, frames: int, pixels: int, runs: dict[str, list]) -> tuple[str
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clip", type=Path, default=VIDEOS / "dfkimera_shaky.mp4")
-    parser.add_argument("--frames", type=int, default=120)
-    parser.add_argument("--sizes", default="640x360,1080x1920,2160x3840")
+    parser = common.parser(__doc__)
+    common.add_clip(parser, VIDEOS / "dfkimera_shaky.mp4")
+    common.add_frames(parser, 120, "frames of each input")
+    parser.add_argument("--sizes", default="640x360,1080x1920,2160x3840", help="inputs' sizes (default: %(default)s)")
     parser.add_argument("--long", action="store_true", help="also 1000 frames of 1920x1080")
-    parser.add_argument("--repeat", type=int, default=1)
-    parser.add_argument("--record-size", default="960")
-    parser.add_argument("--work", type=Path, default=Path("bench_out/recording"))
-    parser.add_argument("--no-report", action="store_true")
+    common.add_repeat(parser, 1)
+    parser.add_argument("--record-size", default="960", help="the recordings' --record-size (default: %(default)s)")
+    common.add_work(parser, Path("bench_out/recording"))
+    common.add_report(parser, common.RECORDING_REPORT)
     args = parser.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
     inputs = [(size, args.frames) for size in args.sizes.split(",") if size]
     if args.long:
         inputs.append(("1920x1080", 1000))
     lines = ["## recording_cost.py: plain against `--rrd`, full mode, CPU and peak memory", "",
-             f"{machine_line()}; input: {args.clip.name} cropped and scaled; recorded at `--record-size "
+             f"{common.machine_line()}; input: {args.clip.name} cropped and scaled; recorded at `--record-size "
              f"{args.record_size}`; medians of {args.repeat} run(s) each, plain and recorded in turn.", "",
              "| input | frames | plain CPU s | --rrd CPU s | CPU ratio (bound 1.30) | plain peak MB | --rrd peak MB | "
              "peak added MB | .rrd MB | bounds |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -123,8 +121,9 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(line)
         print(line, flush=True)
     lines += ["", "Every bound met." if all_met else "Some bound NOT met (rows marked)."]
-    if not args.no_report:
-        print(f"wrote {write_section('recording_cost', chr(10).join(lines), REPORT)}")
+    report = common.report_path(args)
+    if report is not None:
+        print(f"wrote {common.write_section('recording_cost', chr(10).join(lines), report, common.RECORDING_HEADER)}")
     return 0 if all_met else 1
 
 

@@ -1,27 +1,23 @@
-"""Benchmark: CPU ms a frame of each stage (`ffviz bench --profile`, ffviz/bench_profile.py) into the speed report,
+"""Benchmark: CPU ms a frame of each stage (`ffviz bench --profile`, ffviz/bench/profile.py) into the speed report,
 and of each thread of a default run (both cores: frame workers, the decoder thread, x264's threads, the main
 thread that converts and writes), from the kernel's per-thread accounting (/proc/self/task, Linux).
 
-Usage: python benchmarks/speed_profile.py [--clip ../shared/videos/vplab_C.avi] [--modes none,full] [--no-recording]
-       [--report docs/benchmarks-speed.md | --no-report]
+Usage: python -m benchmarks.speed.speed_profile [--clip ../shared/videos/vplab_C.avi] [--modes none,full]
+       [--no-recording] [--report docs/benchmarks-speed.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import tempfile
 import threading
 from pathlib import Path
 
-from ffviz import bench_profile
+from benchmarks import common
+from ffviz.bench import profile as bench_profile
 from pipeline.runtime import memory
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import speed_report  # noqa: E402  (benchmarks/ is not a package)
-
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
 THREAD_GROUPS = (("ffviz-frame", "frame workers (motion, warp, completion, deblur)"),
                  ("ffviz-decode", "decoding + RGB conversion (both passes)"),
                  ("MainThread", "main (RGB -> YUV, muxing, orchestration)"),
@@ -82,23 +78,22 @@ def thread_profile(clip: Path, mode: str) -> tuple[dict[str, float], int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clip", type=Path, default=VIDEOS / "vplab_C.avi")
-    parser.add_argument("--modes", default="none,full")
-    parser.add_argument("--no-recording", action="store_true")
-    parser.add_argument("--report", type=Path, default=speed_report.REPORT)
-    parser.add_argument("--no-report", action="store_true")
+    parser = common.parser(__doc__)
+    common.add_clip(parser, VIDEOS / "vplab_C.avi")
+    parser.add_argument("--modes", default="none,full", help="ffviz modes, comma-separated (default: %(default)s)")
+    parser.add_argument("--no-recording", action="store_true", help="leave out the recording's column")
+    common.add_report(parser, common.SPEED_REPORT)
     args = parser.parse_args(argv)
     if not args.clip.is_file():
         print(f"{args.clip} not found: nothing measured")
         return 0
     memory.reuse_freed_memory()  # as `ffviz` does at its start (pipeline/runtime/memory.py)
-    started = speed_report.machine_line()
+    started = common.machine_line()
     rows = [bench_profile.profile_stages(args.clip, mode, recording=not args.no_recording).line()
             for mode in args.modes.split(",")]
     lines = ["## Where the CPU goes: each stage's CPU ms a frame", "",
-             f"Written by `benchmarks/speed_profile.py` ({started}) with `ffviz bench --profile`'s measurement "
-             "(ffviz/bench_profile.py: one worker in process, OpenCV's threads off, after a short warm-up; total: the "
+             f"Written by `benchmarks/speed/speed_profile.py` ({started}) with `ffviz bench --profile`'s measurement "
+             "(ffviz/bench/profile.py: one worker in process, OpenCV's threads off, after a short warm-up; total: the "
              "run without recording, every thread; recording: a second run's extra CPU with a full .rrd).", "",
              bench_profile.table_header(), *rows]
     labels = [label for _, label in THREAD_GROUPS] + [OTHER_THREADS]
@@ -109,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         groups, _ = thread_profile(args.clip, mode)
         lines.append(f"| {mode} | " + " | ".join(f"{groups.get(label, 0.0):.1f}" for label in labels)
                      + f" | {sum(groups.values()):.1f} |")
-    speed_report.publish("profile", lines, None if args.no_report else args.report)
+    common.publish("profile", lines, common.report_path(args), common.SPEED_HEADER)
     return 0
 
 

@@ -4,7 +4,7 @@ For each clip: one motion pass, then for each k the residual jitter the output w
 exactly as pipeline.evaluation.metrics measures a video (its trajectory() and residual_jitter() applied to the
 output's inter-frame motion stab_t <- stab_(t-1) = S_t^-1 T_t S_(t-1)), and the crop it costs (area kept
 by the largest window valid in every frame).
-Usage: python benchmarks/choose_k.py [--radii 0,6,15] [CLIPS...]   (default: every clip in ../shared/videos)
+Usage: python -m benchmarks.quality.choose_k [--radii 0,6,15] [CLIPS...]   (default: every clip in ../shared/videos)
 With --radii 0 it measures a video's own residual jitter, e.g. a peer's output, on the same scale.
 """
 
@@ -14,6 +14,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+from benchmarks import common
 from pipeline.evaluation import metrics
 from pipeline.stages import motion, smoothing, warping
 from pipeline import stabilize
@@ -22,7 +24,7 @@ from pipeline.runtime.observer import NullObserver, null_progress
 from pipeline.runtime.source import FileSource
 
 RADII = (0, 6, 15, 30, 45, 60, 90)
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
 
 
 def output_jitter(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, width: int, height: int, fps: float) -> float:
@@ -32,11 +34,14 @@ def output_jitter(curr_from_prev: np.ndarray, orig_from_stab: np.ndarray, width:
     return metrics.residual_jitter(metrics.trajectory(steps, width, height), fps)[0]
 
 
-def main(argv: list[str]) -> int:
-    radii = RADII
-    if argv[:1] == ["--radii"]:
-        radii, argv = tuple(int(k) for k in argv[1].split(",")), argv[2:]
-    clips = [Path(a) for a in argv] or sorted(p for p in VIDEOS.iterdir() if p.suffix in (".mp4", ".avi"))
+def main(argv: list[str] | None = None) -> int:
+    parser = common.parser(__doc__)
+    parser.add_argument("clips", nargs="*", type=Path, help="videos (default: every clip in ../shared/videos)")
+    parser.add_argument("--radii", default=",".join(map(str, RADII)), help="values of k, comma-separated "
+                        "(default: %(default)s)")
+    args = parser.parse_args(argv)
+    radii = tuple(int(k) for k in args.radii.split(","))
+    clips = args.clips or sorted(p for p in VIDEOS.iterdir() if p.suffix in (".mp4", ".avi"))
     print(f"{'clip':34s} " + " ".join(f"k={k:<2d} jit/crop" for k in radii))
     table = []
     for clip in clips:
@@ -59,4 +64,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main())

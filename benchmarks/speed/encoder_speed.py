@@ -8,13 +8,12 @@
    (ffviz's default and `ffviz bench`'s peers), ffviz none against the transcode at CRF 23, and none and crop
    with --no-deblur (vid.stab does not deblur: what the rest of ffviz's chain costs).
 
-Usage: python benchmarks/encoder_speed.py [--clip ../shared/videos/vplab_C.avi] [--repeat 3]
+Usage: python -m benchmarks.speed.encoder_speed [--clip ../shared/videos/vplab_C.avi] [--repeat 3]
        [--report docs/benchmarks-speed.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import resource
 import shutil
 import statistics
@@ -26,12 +25,10 @@ from pathlib import Path
 
 import av
 
+from benchmarks import common
 from pipeline.runtime import video_reader
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import speed_report  # noqa: E402  (benchmarks/ is not a package)
-
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
 
 
 def _cpu(who: int) -> float:
@@ -84,16 +81,15 @@ def methods(clip: Path, tmp: str) -> dict[str, list[list[str]]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clip", type=Path, default=VIDEOS / "vplab_C.avi")
-    parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--report", type=Path, default=speed_report.REPORT)
-    parser.add_argument("--no-report", action="store_true")
+    parser = common.parser(__doc__)
+    common.add_clip(parser, VIDEOS / "vplab_C.avi")
+    common.add_repeat(parser, 3)
+    common.add_report(parser, common.SPEED_REPORT)
     args = parser.parse_args(argv)
     if not args.clip.is_file():
         print(f"{args.clip} not found: nothing measured")
         return 0
-    started = speed_report.machine_line()
+    started = common.machine_line()
     frames = [frame.rgb for frame in video_reader.VideoReader(args.clip)]
     fps = round(video_reader.probe_video(args.clip).fps)
     encoder: dict[str, list[tuple[float, float]]] = {"PyAV default (slice threads)": [], "frame threads (AUTO)": []}
@@ -115,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
         return statistics.median(w for w, _ in runs), statistics.median(c for _, c in runs)
 
     lines = ["## Encoding: ffviz's writer and `--mode none`/`crop` against ffmpeg at the same x264 settings", "",
-             f"Written by `benchmarks/encoder_speed.py` ({started}) on {args.clip.name}, medians of {args.repeat}.", "",
+             f"Written by `benchmarks/speed/encoder_speed.py` ({started}) on {args.clip.name}, medians of "
+             f"{args.repeat}.", "",
              "The encoder alone (frames in memory, x264 CRF 18 preset medium, this process):", "",
              "| encoder threads | wall s | CPU s |", "|---|---|---|"]
     lines += [f"| {name} | {med(runs)[0]:.1f} | {med(runs)[1]:.1f} |" for name, runs in encoder.items()]
@@ -133,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
         plain = med(commands_runs["ffviz none --no-deblur (CRF 18)"])
         lines += [f"Without deblurring: none {plain[0] / med(vidstab)[0]:.2f}x vid.stab's wall, "
                   f"{plain[1] / med(vidstab)[1]:.2f}x its CPU."]
-    speed_report.publish("encoding", lines, None if args.no_report else args.report)
+    common.publish("encoding", lines, common.report_path(args), common.SPEED_HEADER)
     return 0
 
 

@@ -4,15 +4,15 @@ The clip (default ../shared/videos/vplab_C.avi, its first --frames frames) is co
 (yuv420p10le, tagged BT.709), and that to an 8-bit copy (yuv420p, the same codec and tags), so the two differ only
 in depth. Each is stabilized by `ffviz stabilize --mode full` in a process of its own, interleaved (8, 10, 8, ...)
 so that load on the shared machine spreads over both; the measure is the child's CPU seconds (user + system, all
-threads), the median of --repeats runs, after one warm-up run of each (numba compiles its float32 kernels once).
+threads), the median of --repeat runs, after one warm-up run of each (numba compiles its float32 kernels once).
 A third run writes the 10-bit clip with --codec h264 (High 10), to tell the encoder's share from the pipeline's.
-The outputs' depth and tags are listed beside the inputs'. Writes docs/benchmarks-colour.md.
-Usage: python benchmarks/colour_depth.py [--clip PATH] [--frames 60] [--repeats 3] [--report docs/benchmarks-colour.md]
+The outputs' depth and tags are listed beside the inputs'. Writes its section of docs/benchmarks-colour.md.
+Usage: python -m benchmarks.speed.colour_depth [--clip PATH] [--frames 60] [--repeat 3]
+       [--report docs/benchmarks-colour.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import os
 import platform
@@ -25,10 +25,11 @@ from pathlib import Path
 
 import av
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from benchmarks import common
+from pipeline.runtime import video_reader
 
-from pipeline.runtime import video_reader  # noqa: E402
+ROOT = common.ROOT
+REPORT = common.DOCS / "benchmarks-colour.md"
 
 BUDGET = 1.5
 
@@ -60,11 +61,11 @@ def describe(path: Path) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clip", type=Path, default=ROOT.parent / "shared" / "videos" / "vplab_C.avi")
-    parser.add_argument("--frames", type=int, default=60)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--report", type=Path, default=ROOT / "docs" / "benchmarks-colour.md")
+    parser = common.parser(__doc__)
+    common.add_clip(parser, common.VIDEOS / "vplab_C.avi")
+    common.add_frames(parser, 60)
+    common.add_repeat(parser, 3, "--repeats")
+    common.add_report(parser, REPORT)
     args = parser.parse_args()
     if not args.clip.is_file():
         sys.exit(f"clip not found: {args.clip}")
@@ -79,7 +80,7 @@ def main() -> None:
         outputs = {name: folder / f"out_{i}.mp4" for i, name in enumerate(clips)}
         for name, (clip, extra) in clips.items():  # warm-up: numba's first compile of each kernel specialisation
             cpu_seconds(clip, outputs[name], extra)
-        for _ in range(args.repeats):
+        for _ in range(args.repeat):
             for name, (clip, extra) in clips.items():
                 runs[name].append(cpu_seconds(clip, outputs[name], extra))
                 print(f"{name}: {runs[name][-1]:.1f} CPU s", flush=True)
@@ -90,11 +91,12 @@ def main() -> None:
     lines = [
         "# Benchmark: what 10 bits cost (full mode)",
         "",
-        f"Written by `benchmarks/colour_depth.py` on {datetime.date.today()} ({platform.machine()}, {os.cpu_count()} "
-        f"cores, shared with other jobs). Clip: the first {args.frames} frames of `{args.clip.name}`, converted by "
-        "ffmpeg to 10-bit HEVC (BT.709 tags) and that to an 8-bit copy; `ffviz stabilize --mode full` on each in a "
-        f"process of its own, interleaved, CPU seconds (user + system, all threads), median of {args.repeats} after "
-        "a warm-up run of each. 10-bit frames travel as float32 RGB, 8-bit as uint8 (docs/colour.md).",
+        f"Written by `benchmarks/speed/colour_depth.py` on {datetime.date.today()} ({platform.machine()}, "
+        f"{os.cpu_count()} cores, shared with other jobs). Clip: the first {args.frames} frames of "
+        f"`{args.clip.name}`, converted by ffmpeg to 10-bit HEVC (BT.709 tags) and that to an 8-bit copy; `ffviz "
+        "stabilize --mode full` on each in a process of its own, interleaved, CPU seconds (user + system, all "
+        f"threads), median of {args.repeat} after a warm-up run of each. 10-bit frames travel as float32 RGB, 8-bit "
+        "as uint8 (docs/colour.md).",
         "",
         "| clip | CPU s (median) | runs | input file | output file |",
         "|---|---|---|---|---|",
@@ -107,8 +109,7 @@ def main() -> None:
     lines += ["", f"**10-bit / 8-bit: {ratio:.2f}x** ({verdict} the {BUDGET}x budget of issue 29). With both written by "
               f"x264 (the 10-bit one as High 10) the ratio is {pipeline_ratio:.2f}x: that is the float32 frames' "
               f"share, the rest is x265's (HEVC Main 10, the default for deeper input) over x264's.", ""]
-    args.report.write_text("\n".join(lines))
-    print("\n".join(lines))
+    common.publish("colour_depth", lines, common.report_path(args))
 
 
 if __name__ == "__main__":

@@ -1,20 +1,19 @@
 """Benchmark: `--quality fast` against the default preset and OpenCV's chain (mosaic + Telea), issue 24.
 
 1. PSNR over the synthesized pixels on ground-truth cases (pipeline/evaluation/completion.py, as
-   benchmarks/completion_psnr.py measures): synthetic worlds and jittered 80 % crops of real clips, for our default
-   preset, our fast preset and mosaic + Telea (the OpenCV sample's chain, scored on the same frames); the target is
-   fast >= mosaic + Telea + 2 dB on every case. CPU seconds a frame of each of our runs (the judge included).
+   benchmarks/quality/completion_psnr.py measures): synthetic worlds and jittered 80 % crops of real clips, for our
+   default preset, our fast preset and mosaic + Telea (the OpenCV sample's chain, scored on the same frames); the
+   target is fast >= mosaic + Telea + 2 dB on every case. CPU seconds a frame of each of our runs (the judge included).
 2. Speed of the whole command on a real clip: `ffviz stabilize --mode full --quality Q` for each preset and the
    OpenCV sample's full-frame chain where it is built (`./run bench` builds it), wall and CPU seconds of the
    process tree, medians of --repeat; the target is fast's wall <= 0.6x the sample's.
 
-Usage: python benchmarks/fast_preset.py [--frames 32] [--clip ../shared/videos/vplab_C.avi] [--repeat 3]
+Usage: python -m benchmarks.speed.fast_preset [--frames 32] [--clip ../shared/videos/vplab_C.avi] [--repeat 3]
        [--skip-psnr] [--skip-speed] [--report docs/benchmarks-speed.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import resource
 import statistics
@@ -24,6 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks import common
 from pipeline.config import StabilizeConfig
 from pipeline.evaluation.completion import completion_scores, crop_completion_scores, jittered_crop
 from pipeline.evaluation.synthetic import SyntheticConfig, generate
@@ -31,12 +31,8 @@ from pipeline.presets import QUALITIES, with_quality
 from pipeline.runtime.source import FileSource, one_pass
 from pipeline.stages.smoothing import SmoothingConfig
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import speed_report  # noqa: E402  (benchmarks/ is not a package)
-
-REPO = Path(__file__).resolve().parents[1]
-VIDEOS = REPO.parent / "shared" / "videos"
-SAMPLE = REPO / ".cache" / "peers" / "videostab" / "videostab"
+VIDEOS = common.VIDEOS
+SAMPLE = common.ROOT / ".cache" / "peers" / "videostab" / "videostab"
 SYNTHETIC = (("coffee", 1), ("astronaut", 3), ("rocket", 5))
 REAL = ("vplab_C.avi", "linyihaolyh_shaky.mp4")
 
@@ -101,23 +97,22 @@ def speed_rows(clip: Path, repeat: int) -> dict[str, tuple[float, float]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=32)
-    parser.add_argument("--clip", type=Path, default=VIDEOS / "vplab_C.avi")
-    parser.add_argument("--repeat", type=int, default=3)
+    parser = common.parser(__doc__)
+    common.add_frames(parser, 32, "frames of each ground-truth case")
+    common.add_clip(parser, VIDEOS / "vplab_C.avi")
+    common.add_repeat(parser, 3)
     parser.add_argument("--skip-psnr", action="store_true")
     parser.add_argument("--skip-speed", action="store_true")
-    parser.add_argument("--report", type=Path, default=speed_report.REPORT)
-    parser.add_argument("--no-report", action="store_true")
+    common.add_report(parser, common.SPEED_REPORT)
     args = parser.parse_args(argv)
-    started = speed_report.machine_line()
+    started = common.machine_line()
     lines = ["## `--quality fast` against the default and OpenCV's chain", "",
-             f"Written by `benchmarks/fast_preset.py` ({started}). The presets: pipeline/presets.py.", ""]
+             f"Written by `benchmarks/speed/fast_preset.py` ({started}). The presets: pipeline/presets.py.", ""]
     if not args.skip_psnr:
         rows = psnr_rows(args.frames)
         lines += [f"PSNR (dB) over the synthesized pixels, first {args.frames} frames of each ground-truth case "
-                  "(completion before deblurring, as benchmarks/completion_psnr.py); target: fast >= mosaic + Telea "
-                  "+ 2 dB. CPU ms a frame of each of our runs, the judge's own work included.", "",
+                  "(completion before deblurring, as benchmarks/quality/completion_psnr.py); target: fast >= mosaic + "
+                  "Telea + 2 dB. CPU ms a frame of each of our runs, the judge's own work included.", "",
                   "| case | default | fast | mosaic + Telea | fast - (mosaic + Telea) | CPU ms/frame default | "
                   "CPU ms/frame fast |", "|---|---|---|---|---|---|---|"]
         for case, psnr, cpu in rows:
@@ -135,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
         fast = speeds["ffviz full --quality fast"]
         lines += ["", f"Fast against the sample: wall {fast[0] / sample[0]:.2f}x, CPU {fast[1] / sample[1]:.2f}x "
                       "(target: wall <= 0.6x)." if sample else "The OpenCV sample is not built here: no ratio."]
-    speed_report.publish("fast-preset", lines, None if args.no_report else args.report)
+    common.publish("fast-preset", lines, common.report_path(args), common.SPEED_HEADER)
     return 0
 
 

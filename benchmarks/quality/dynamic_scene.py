@@ -16,25 +16,25 @@ Columns:
   synth show show-through inside the object over synthesized pixels
   flicker    (--flicker) pipeline.evaluation.metrics' synthesized-pixel flicker ratio of the output video, when available
 
-Usage: python benchmarks/dynamic_scene.py [--colour-only] [--flicker] [--report docs/benchmarks-dynamic.md]
+Usage: python -m benchmarks.quality.dynamic_scene [--colour-only] [--flicker] [--report [docs/benchmarks-dynamic.md]]
+(--report: also write the table as its section of the report)
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import platform
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
+from benchmarks import common
 from pipeline.stages import deblur
 from pipeline.evaluation.completion import dynamic_scores
 from pipeline.stabilize import StabilizeConfig, stabilize
 from pipeline.evaluation.synthetic import SyntheticConfig, generate, write_video
 
+REPORT = common.DOCS / "benchmarks-dynamic.md"
 CASES = (  # name, image, seed, object kind, sweep
     ("person chelsea", "chelsea", 3, "person", 0.6),
     ("person astronaut border", "astronaut", 2, "person", 1.0),
@@ -58,10 +58,10 @@ def flicker(video, config: StabilizeConfig) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--colour-only", action="store_true", help="also run with the structure guard off")
     parser.add_argument("--flicker", action="store_true", help="also write each output and measure its flicker")
-    parser.add_argument("--report", type=Path, help="also write the table as markdown to this file")
+    common.add_report(parser, REPORT, by_default=False)
     args = parser.parse_args()
     configs = [("structure guard (default)", StabilizeConfig())]
     if args.colour_only:
@@ -84,14 +84,14 @@ def main() -> None:
                     f"{s.synthesized_show_through:+.3f} | {flick:.2f} | {seconds:.1f} |")
             lines.append(line)
             print(line, flush=True)
-    if args.report:
+    report = common.report_path(args)
+    if report is not None:
         stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
         machine = f"{platform.processor() or platform.machine()}, Python {platform.python_version()}"
-        args.report.write_text(
-            f"# Dynamic scenes: moving objects on ground truth\n\nWritten by `benchmarks/dynamic_scene.py` on {stamp} "
-            f"({machine}). Columns: see the script's docstring. NaN: no object pixels in that set.\n\n"
-            + "\n".join(lines) + "\n")
-        print(f"wrote {args.report}")
+        body = (f"# Dynamic scenes: moving objects on ground truth\n\nWritten by `benchmarks/quality/dynamic_scene.py` "
+                f"on {stamp} ({machine}). Columns: see the script's docstring. NaN: no object pixels in that set.\n\n"
+                + "\n".join(lines))
+        print(f"wrote {common.write_section('dynamic_scene', body, report)}")
 
 
 if __name__ == "__main__":

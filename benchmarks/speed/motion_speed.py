@@ -7,30 +7,25 @@ does (metrics.video_motion_stats; written as MPEG-4 at qscale 2 so the encoder s
 A variant is kept only where the jitter on every clip stays within the noise: the spread of the default's jitter
 between two encodings of the same frames (MPEG-4 q2 and q4), or 1 %, whichever is larger.
 
-Usage: python benchmarks/motion_speed.py [--clips a.avi,b.avi] [--variants default,corners300] [--repeat 3]
+Usage: python -m benchmarks.speed.motion_speed [--clips a.avi,b.avi] [--variants default,corners300] [--repeat 3]
        [--report docs/benchmarks-speed.md | --no-report]
 """
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
-import sys
-
+from benchmarks import common
 from pipeline.evaluation import metrics
 from pipeline.runtime.encoding import Encoding
 from pipeline.runtime import video_reader
 from pipeline.stabilize import StabilizeConfig, stabilize
 from pipeline.stages import motion
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import speed_report  # noqa: E402  (benchmarks/ is not a package)
-
-VIDEOS = Path(__file__).resolve().parents[2] / "shared" / "videos"
+VIDEOS = common.VIDEOS
 CLIPS = ("vplab_C.avi", "sudheerachary_shaky-5.avi", "zhangyilang_03_input.avi")
 VARIANTS: dict[str, dict] = {  # changes to MotionConfig's defaults
     "default": {},
@@ -65,12 +60,11 @@ def output_jitter(clip: Path, config: motion.MotionConfig, workdir: Path, qscale
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--clips", default=",".join(CLIPS))
-    parser.add_argument("--variants", default=",".join(VARIANTS))
-    parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--report", type=Path, default=speed_report.REPORT)
-    parser.add_argument("--no-report", action="store_true")
+    parser = common.parser(__doc__)
+    parser.add_argument("--clips", default=",".join(CLIPS), help="shared clips, comma-separated (default: %(default)s)")
+    parser.add_argument("--variants", default=",".join(VARIANTS), help="of VARIANTS (default: %(default)s)")
+    common.add_repeat(parser, 3)
+    common.add_report(parser, common.SPEED_REPORT)
     args = parser.parse_args(argv)
     clips = [VIDEOS / name for name in args.clips.split(",")]
     clips = [clip for clip in clips if clip.is_file()]
@@ -78,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no clips found in {VIDEOS}: nothing measured")
         return 0
     names = args.variants.split(",")
-    started = speed_report.machine_line()
+    started = common.machine_line()
     cpu: dict[tuple[str, str], float] = {}
     jitter: dict[tuple[str, str], float] = {}
     noise: dict[str, float] = {}
@@ -96,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
                       f"jitter {jitter[name, clip.name]:.3f} px (noise {noise[clip.name]:.3f})", flush=True)
             del frames
     lines = ["## Motion estimation: CPU a frame against output jitter", "",
-             f"Written by `benchmarks/motion_speed.py` ({started}; --repeat {args.repeat}). CPU ms a frame of "
+             f"Written by `benchmarks/speed/motion_speed.py` ({started}; --repeat {args.repeat}). CPU ms a frame of "
              "motion.prepare + motion.estimate on frames decoded once (median of the repeats); jitter: residual "
              "jitter (px) of the `--mode none` output with that motion config (`ffviz metrics`); noise: the default's "
              "jitter between MPEG-4 q2 and q4 encodings of the same frames, or 1 %. A variant is within noise "
@@ -110,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {name} ({', '.join(f'{k}={v}' for k, v in VARIANTS[name].items()) or 'as shipped'}) "
                      f"| {cells} | {'-' if ok is None else 'yes' if ok else 'no'} |")
     lines += ["", "Noise (px): " + ", ".join(f"{c.name} {noise[c.name]:.3f}" for c in clips) + "."]
-    speed_report.publish("motion", lines, None if args.no_report else args.report)
+    common.publish("motion", lines, common.report_path(args), common.SPEED_HEADER)
     return 0
 
 

@@ -1,18 +1,17 @@
 """Peak memory of `ffviz stabilize` on long video: synthetic 1080p clips of 30 s and 5 min (not a test; prints a table).
 
-    .venv/bin/python benchmarks/memory_long.py [--modes crop,none] [--seconds 30,300] [--size 1920x1080]
-                                               [--fps 30] [--work DIR]
+    .venv/bin/python -m benchmarks.speed.memory_long [--modes crop,none] [--seconds 30,300] [--size 1920x1080]
+                                                     [--fps 30] [--work DIR]
 
 Each clip is rendered frame by frame (pipeline.evaluation.synthetic.stream_frames) straight into an H.264 MP4, so
 the generator never holds the video; clips are kept in --work and reused. Each run of `ffviz stabilize`
-is a child process measured as `ffviz bench` measures (ffviz.bench.run_measured: wall and CPU seconds,
+is a child process measured as `ffviz bench` measures (ffviz.bench.measure.run_measured: wall and CPU seconds,
 peak RSS from wait4). Streaming should make the peak independent of the length: the verdict printed
 at the end says whether the longest clip's peak is within 10 % of the shortest's and under 1.5 GiB.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -21,7 +20,9 @@ from typing import Iterator
 
 import numpy as np
 
-from ffviz.bench import ffviz_command, run_measured
+from benchmarks import common
+from ffviz.bench.measure import run_measured
+from ffviz.bench.methods import ffviz_command
 from pipeline.evaluation import synthetic
 
 PEAK_GROWTH_LIMIT = 1.10  # the long clip's peak may exceed the short one's by at most 10 %
@@ -50,13 +51,12 @@ def write_long_clip(path: Path, width: int, height: int, fps: int, seconds: floa
 
 
 def main(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--modes", default="crop,none", help="ffviz modes, comma-separated (default: %(default)s)")
     parser.add_argument("--seconds", default="30,300", help="clip durations, comma-separated (default: %(default)s)")
     parser.add_argument("--size", default="1920x1080")
     parser.add_argument("--fps", type=int, default=30)
-    parser.add_argument("--work", type=Path, default=Path("bench_out/memory_long"),
-                        help="clips, outputs and memory_long.json (default: %(default)s)")
+    common.add_work(parser, Path("bench_out/memory_long"))  # and memory_long.json
     args = parser.parse_args(argv)
     width, height = map(int, args.size.split("x"))
     durations = sorted(float(s) for s in args.seconds.split(","))
