@@ -69,15 +69,18 @@ MIN_COMMON_FRACTION = 0.2
 
 @dataclass(frozen=True)
 class DeblurConfig:
-    enabled: bool = True
+    enabled: bool = True  # False: no deblurring (--no-deblur)
     alpha: float = DEBLUR_ALPHA  # eq. 31, in intensity units (0..255) of the alignment error E
     neighbour_frames: int = 6  # neighbours t-r..t+r are compared (<= the completion radius: their warps are reused)
     min_ratio: float = MIN_RATIO  # a neighbour contributes only where b_t / b_t' exceeds this (eq. 31: 1)
-    error_sigma_px: float = ERROR_SIGMA_PX  # low-pass of the signed difference before E is taken (0: eq. 29)
-    reject_error: float = REJECT_ERROR  # E above this marks another scene (moving object, misregistration)
-    reject_grow_px: int = REJECT_GROW_PX  # ... and so does everything this close to such a pixel
-    structure_min: float | None = STRUCTURE_MIN  # refuse where the local structure agreement is below this (None: off)
-    structure_window_px: int = STRUCTURE_WINDOW_PX  # half-width of its window
+    # px at 360 rows (Gaussian sigma): low-pass of the signed difference before E is taken (0: eq. 29 as written)
+    error_sigma_px: float = ERROR_SIGMA_PX
+    reject_error: float = REJECT_ERROR  # intensity 0..255: E above this marks another scene (moving object, ...)
+    reject_grow_px: int = REJECT_GROW_PX  # px at 360 rows: ... and so does everything this close to such a pixel
+    # Correlation-like score in [-1, 1] (``StructureGuard``): refuse where the local structure agreement is below this
+    # (None: off, the colour test alone).
+    structure_min: float | None = STRUCTURE_MIN
+    structure_window_px: int = STRUCTURE_WINDOW_PX  # px at 360 rows: half-width of its window
 
     def __post_init__(self) -> None:
         if not (self.alpha > 0 and math.isfinite(self.alpha)):
