@@ -94,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     from ffviz.compare import add_parser as add_compare_parser
 
     add_compare_parser(commands)
-    from ffviz.bench import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
+    from ffviz.bench.command import add_parser as add_bench_parser  # imports no pipeline stage: the runs are children
 
     add_bench_parser(commands)
     from ffviz.debug_command import add_parser as add_debug_parser  # imports no recorder: that happens when it runs
@@ -247,8 +247,7 @@ def _add_path_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--smoothing-radius", "-k", type=int, default=None, metavar="K",
                    help="smoothing radius: frames on each side averaged into each frame's camera path (eq. 18); "
                         "larger is steadier but needs more completion or crop (default: "
-                        + ", ".join(f"{k} in {mode} mode" for mode, k in stab.DEFAULT_RADII.items())
-                        + f"; {stab.HARD_CROP_RADIUS} in crop mode with a window inside every frame)")
+                        f"{stab.DEFAULT_RADIUS}; {stab.HARD_CROP_RADIUS} in crop mode with a window inside every frame)")
     p.add_argument("--smoothing-sigma", type=float, default=None, metavar="SIGMA",
                    help="width of that Gaussian, in frames (default: sqrt(K))")
     p.add_argument("--path", choices=smoothing.PATHS, default=None,
@@ -301,7 +300,7 @@ def _add_crop_options(p: argparse.ArgumentParser) -> None:
                    help="with --mode crop on eq. 18's path: the window is the largest whose parts outside the input "
                         "frames are at most SHARE of the output's pixels over the clip, completed from neighbouring "
                         "frames as in full mode; 0: a window inside every frame, nothing synthesized, on the auto "
-                        "path at -k 30 (default: " + f"{stab.DEFAULT_CROP_FILL:g}" + ")")
+                        f"path at -k {stab.HARD_CROP_RADIUS} (default: {stab.DEFAULT_CROP_FILL:g})")
 
 
 def _add_motion_options(p: argparse.ArgumentParser) -> None:
@@ -475,7 +474,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from ffviz.bench import cmd_bench as run_bench
+    from ffviz.bench.command import cmd_bench as run_bench
 
     return run_bench(args)
 

@@ -36,12 +36,11 @@ CROP_FILL_WARNING = ("the crop window leaves the frames by more than --crop-fill
                      "{share:.1%} of the output is completed, not {fill:.1%} (a smaller -k keeps the path nearer its "
                      "frames)")
 # Crop mode's L1 window without --crop-scale is first tried at the one eq. 18's path at this radius keeps. --path l1:
-# the room the shake within about half a second needs (about what vid.stab's defaults keep:
-# docs/benchmarks-l1-vs-vidstab.md). --path auto (crop mode's default) also prices the path's shake
-# (l1_path.L1PathConfig.shake_weight) at AUTO_SHAKE_WEIGHT, five times Grundmann et al.'s weight of jerk, and so
-# needs less room: the room of a third of a second. On six of the seven shared clips its path in that wider window
-# is steadier than the L1 path without the term in the window of radius 15; on vplab_C 1.02x as shaky, keeping 0.014
-# more of the frame (docs/decisions.md, 2026-11-26).
+# the room the shake within about half a second needs, about what vid.stab's defaults keep (docs/decisions.md D26).
+# --path auto (crop mode's default with its window inside every frame) also prices the path's shake
+# (l1_path.L1PathConfig.shake_weight) at AUTO_SHAKE_WEIGHT, five times Grundmann et al.'s weight of jerk, and so needs
+# less room, that of a third of a second: on most shared clips its path in that wider window is steadier than the L1
+# path without the term in the narrower one (D33).
 L1_WINDOW_RADIUS_FRAMES = 15
 AUTO_WINDOW_RADIUS_FRAMES = 10
 AUTO_SHAKE_WEIGHT = 500.0

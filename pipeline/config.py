@@ -12,21 +12,20 @@ from pipeline.stages import completion, deblur, motion, rolling_shutter, smoothi
 
 OutputMode = Literal["full", "none", "crop"]
 OUTPUT_MODES: tuple[str, ...] = ("full", "none", "crop")
-# Each mode's camera path when none is given: eq. 18. Crop mode's window is then the largest centred one whose
-# parts outside the input frames are at most DEFAULT_CROP_FILL of the output's pixels over the clip, completed as
-# in full mode (vid.stab's default fills its window's corners from the previous frame likewise). With --crop-fill 0
-# (nothing synthesized), --crop-scale or --crop adaptive the window stays inside every frame, and crop mode's path
-# is auto: the L1 program inside the widest window where it is as steady as eq. 18's (docs/decisions.md,
-# 2026-11-25 and 2026-11-27).
-DEFAULT_PATHS = {"full": "gaussian", "none": "gaussian", "crop": "gaussian"}
+# Every mode's camera path when none is given: eq. 18 at k = DEFAULT_RADIUS, steadier than vid.stab's cropped output,
+# full mode's wider missing area kept from flickering by completion's temporal consistency (docs/decisions.md D40).
+# Crop mode's window is then the largest centred one whose parts outside the input frames are at most
+# DEFAULT_CROP_FILL of the output's pixels, completed as in full mode, as vid.stab's default fills its window's
+# corners from the previous frame (D41).
+DEFAULT_PATH = "gaussian"
+DEFAULT_RADIUS = 60  # frames on each side of t (eq. 18's k)
+# Crop mode with its window inside every frame (--crop-fill 0, --crop-scale, --crop adaptive): the L1 program in the
+# widest window where it is as steady as eq. 18's, pricing the path's shake (D33), at the radius a SmoothingConfig
+# has by default, since a larger k there only shrinks the window (D41).
 HARD_CROP_PATH = "auto"
-# Eq. 18's radius k by mode: 60, steadier than vid.stab's cropped output on every shared clip, full mode's wider
-# missing area kept from flickering by completion's temporal consistency; a crop window that stays inside every
-# frame at 30, where a larger k only shrinks the window (docs/decisions.md 2026-11-27).
-DEFAULT_RADII = {"full": 60, "none": 60, "crop": 60}
 HARD_CROP_RADIUS = smoothing.DEFAULT_RADIUS
-# The share of the output's pixels crop mode may synthesize by default: on the shared clips a window at least as
-# large as vid.stab's, completed on 18-38 % of the frames of issue 28's seven (docs/decisions.md 2026-11-27).
+# The share of the output's pixels (mean over the clip) crop mode may synthesize by default: the smallest fill tried
+# whose window is larger than vid.stab's on every shared clip (D41).
 DEFAULT_CROP_FILL = 0.003
 
 
@@ -42,26 +41,31 @@ def default_path(mode: str, crop: CropConfig, *, l1_segments: bool = False) -> s
     with ``l1_segments``, path segments planned by the L1 program in the window)."""
     if mode == "crop" and crop_window_inside(crop, l1=l1_segments):
         return HARD_CROP_PATH
-    return DEFAULT_PATHS[mode]
+    return DEFAULT_PATH
 
 
 def default_radius(mode: str, path: str, crop: CropConfig, *, l1_segments: bool = False) -> int:
     """Eq. 18's k when none is given, for ``mode`` on ``path``."""
     if mode == "crop" and crop_window_inside(crop, l1=l1_segments or path != "gaussian"):
         return HARD_CROP_RADIUS
-    return DEFAULT_RADII[mode]
+    return DEFAULT_RADIUS
 
 
 @dataclass(frozen=True)
 class StabilizeConfig:
-    mode: OutputMode = "full"
-    motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)
-    # None: the mode's DEFAULT_PATHS path at its DEFAULT_RADII radius (set here, so the config always holds one)
-    smoothing: smoothing.SmoothingConfig = None  # type: ignore[assignment]
-    completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)
-    deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)
-    crop: CropConfig = field(default_factory=CropConfig)  # --mode crop's window: fixed or adaptive
-    rolling_shutter: float | str | None = None  # readout time (fraction of a frame; "0.9" is read), "auto", None: off
+    """A whole run's settings: the output mode and each stage's own config (their fields say their units)."""
+
+    mode: OutputMode = "full"  # full: missing areas completed; crop: a window scaled back up; none: left black
+    motion: motion.MotionConfig = field(default_factory=motion.MotionConfig)  # pass 1, thesis 3.2
+    # The camera path (eq. 18 or the L1 program) and its settings. None, the default: the mode's own path and radius
+    # (default_path, default_radius), which __post_init__ puts here, so a constructed config always holds one.
+    smoothing: smoothing.SmoothingConfig | None = None
+    completion: completion.CompletionConfig = field(default_factory=completion.CompletionConfig)  # chapter 4
+    deblur: deblur.DeblurConfig = field(default_factory=deblur.DeblurConfig)  # chapter 5
+    crop: CropConfig = field(default_factory=CropConfig)  # --mode crop's window: fixed or adaptive, its size and fill
+    # Rolling-shutter correction: the sensor's readout time as a fraction of the frame interval (a number or its text,
+    # "0.9"), "auto" to fit it from the motion, None: off.
+    rolling_shutter: float | str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rolling_shutter", rolling_shutter.parse_readout(self.rolling_shutter))

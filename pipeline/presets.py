@@ -3,8 +3,8 @@
 ``default``: the thesis's chain as configured everywhere else (chapter 4's local warp from four neighbours at the
 flow's 640 px working size, deblurring over +-6 frames). ``fast``: less of the expensive parts, above all motion
 inpainting (eqs. 24-25): local flow to the two nearest neighbours at a 320 px working size, no local registration of
-the neighbours before the mosaic (ECC per neighbour: the largest stage of a default run), a shorter chain of
-completion's candidates (``FAST_LEAVES_OUT``), deblurring over +-3 frames. What it costs and gives against the
+the neighbours before the mosaic (an ECC fit per neighbour), a shorter chain of completion's candidates
+(``FAST_LEAVES_OUT``), deblurring over +-3 frames (docs/decisions.md D18, D34). What it costs and gives against the
 default and against mosaic + Telea (OpenCV's chain): docs/benchmarks-speed.md.
 """
 

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from pipeline.chain import FrameChain, plan_path, render_frames
-from pipeline.config import (DEFAULT_CROP_FILL, DEFAULT_PATHS, DEFAULT_RADII, HARD_CROP_RADIUS, OUTPUT_MODES,
+from pipeline.config import (DEFAULT_CROP_FILL, DEFAULT_PATH, DEFAULT_RADIUS, HARD_CROP_RADIUS, OUTPUT_MODES,
                              OutputMode, StabilizeConfig, default_path, default_radius)
 from pipeline.errors import ConfigError, InputError
 from pipeline.results import FrameResult, MotionPass, PathPlan, Stamp
@@ -29,7 +29,7 @@ from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, o
 from pipeline.stages.adaptive_crop import AdaptiveCrop
 from pipeline.stages import motion, rolling_shutter, warping
 
-__all__ = ["DEFAULT_CROP_FILL", "DEFAULT_PATHS", "DEFAULT_RADII", "HARD_CROP_RADIUS", "OUTPUT_MODES", "default_path",
+__all__ = ["DEFAULT_CROP_FILL", "DEFAULT_PATH", "DEFAULT_RADIUS", "HARD_CROP_RADIUS", "OUTPUT_MODES", "default_path",
            "default_radius", "OutputMode", "StabilizeConfig", "MotionPass", "PathPlan", "FrameResult",
            "FrameChain", "StabilizeReport", "estimate_motion", "run_passes", "stabilize", "stabilize_source"]
 

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from ffviz import bench
+from ffviz.bench import command, measure, methods
 from ffviz.cli import main
 from pipeline.evaluation import synthetic
 
@@ -70,13 +70,30 @@ def test_report_defaults_to_docs_in_a_checkout_only(tmp_path):
     from ffviz.cli import build_parser
 
     args = build_parser().parse_args(["bench"])
-    assert args.output is None and args.output_dir == bench.DEFAULT_OUT  # cmd_bench picks docs/ or DIR/
-    assert bench.DEFAULT_REPORT == bench.REPO / "docs" / "benchmarks.md"
+    assert args.output is None and args.output_dir == command.DEFAULT_OUT  # cmd_bench picks docs/ or DIR/
+    assert command.DEFAULT_REPORT == methods.REPO / "docs" / "benchmarks.md"
     assert build_parser().parse_args(["bench", "--out", str(tmp_path)]).output_dir == tmp_path  # the old spelling
 
 
+def test_a_rewritten_report_keeps_the_sections_written_by_hand(tmp_path):
+    """The reports `ffviz bench -o` rewrites keep their decision-log figures: the part from the first
+    ``<!-- section: NAME -->`` marker on is carried over, once."""
+    from ffviz.bench.report import BenchRow, RunInfo, write_report
+
+    path = tmp_path / "report.md"
+    rows = [BenchRow("a.mp4", "input", 640, 360, 30)]
+    run = RunInfo(repeat=1, cpus=2, load_before=(0.0, 0.0, 0.0), load_after=(0.0, 0.0, 0.0))
+    hand = "<!-- section: decision-log -->\n## From the decision log\n\nD1: 1.02x\n"
+    path.write_text("# Benchmarks\n\nthe old table\n\n" + hand)
+    for _ in range(2):
+        write_report(rows, path, run)
+        text = path.read_text()
+        assert text.startswith("# Benchmarks\n") and "the old table" not in text and "| a.mp4 | input |" in text
+        assert text.endswith("```\n\n" + hand) and text.count("\n<!-- section: ") == 1
+
+
 def test_cpu_model_from_proc_cpuinfo(tmp_path):
-    from ffviz.bench_report import cpu_model
+    from ffviz.bench.report import cpu_model
 
     info = tmp_path / "cpuinfo"
     info.write_text("processor\t: 0\nvendor_id\t: X\nmodel name\t: Test CPU 3000 @ 2.0GHz\n")
@@ -116,7 +133,7 @@ def test_ffviz_rows_measure_speed_memory_and_quality(bench_run):
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="ffmpeg not installed: no vidstab/deshake peers")
 def test_installed_peers_get_rows(bench_run):
     _, rows = bench_run
-    peers = ["vidstab", "deshake"] + (["opencv"] if bench.OPENCV_VIDEOSTAB.is_file() else [])
+    peers = ["vidstab", "deshake"] + (["opencv"] if methods.OPENCV_VIDEOSTAB.is_file() else [])
     for peer in peers:
         row = rows[peer]
         assert row["note"] is None, row["note"]
@@ -149,8 +166,8 @@ def test_unknown_peer_is_one_line_error(tiny_clip, tmp_path, capsys):
 def test_peak_memory_is_the_childs_own():
     # Ballast in this process: a child forked straight from it would report at least this much.
     ballast = b"x" * (300 * MiB)
-    big = bench.run_measured([sys.executable, "-c", "data = b'x' * (200 * 2**20)"])
-    small = bench.run_measured([sys.executable, "-c", "pass"])
+    big = measure.run_measured([sys.executable, "-c", "data = b'x' * (200 * 2**20)"])
+    small = measure.run_measured([sys.executable, "-c", "pass"])
     assert len(ballast) == 300 * MiB
     assert big.returncode == 0 and small.returncode == 0
     assert big.peak_rss_bytes >= 200 * MiB
@@ -159,16 +176,16 @@ def test_peak_memory_is_the_childs_own():
 
 
 def test_run_measured_reports_failures():
-    failed = bench.run_measured([sys.executable, "-c", "import sys; print('working'); sys.exit('boom: bad input')"])
+    failed = measure.run_measured([sys.executable, "-c", "import sys; print('working'); sys.exit('boom: bad input')"])
     assert failed.returncode == 1 and failed.output_tail == "boom: bad input"
-    killed = bench.run_measured([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
+    killed = measure.run_measured([sys.executable, "-c", "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"])
     assert killed.returncode == 128 + 9
-    missing = bench.run_measured(["/nonexistent/program"])
+    missing = measure.run_measured(["/nonexistent/program"])
     assert missing.returncode == 127 and "cannot run /nonexistent/program" in missing.output_tail
 
 
 def test_schedule_interleaves_and_rotates_methods():
-    visits = list(bench.schedule(repeats=2, n_clips=3, n_methods=3))
+    visits = list(command.schedule(repeats=2, n_clips=3, n_methods=3))
     assert [(repeat, clip) for repeat, clip, _ in visits] == [(r, c) for r in range(2) for c in range(3)]
     for _, _, order in visits:
         assert sorted(order) == [0, 1, 2]
@@ -193,8 +210,7 @@ def test_stream_frames_renders_a_shaky_clip_lazily():
 
 
 def test_targets_compare_wall_and_cpu_with_the_peers_against_each_bound():
-    from ffviz.bench import BenchRow
-    from ffviz.bench_report import X264_ONLY, targets
+    from ffviz.bench.report import X264_ONLY, BenchRow, targets
 
     def row(clip, method, size, seconds=None, cpu=None):
         return BenchRow(clip, method, *size, 60, seconds_runs=[] if seconds is None else [seconds],
@@ -236,20 +252,20 @@ def test_machine_ticks_read_steal_from_proc_stat(tmp_path):
     stat = tmp_path / "stat"
     # user nice system idle iowait irq softirq steal guest guest_nice (guest time is inside user and nice)
     stat.write_text("cpu  300 10 40 500 20 0 5 125 50 0\ncpu0 150 5 20 250 10 0 2 63 25 0\n")
-    assert bench.machine_ticks(stat) == (125, 1000)
-    assert bench.steal_share(bench.ticks_between((100, 1000), (125, 1100))) == 0.25
-    assert bench.steal_share(bench.add_ticks((10, 100), (15, 100))) == 0.125
-    assert bench.steal_share((0, 0)) is None and bench.steal_share(None) is None
-    assert bench.ticks_between(None, (1, 2)) is None and bench.add_ticks((1, 2), None) is None
+    assert measure.machine_ticks(stat) == (125, 1000)
+    assert measure.steal_share(measure.ticks_between((100, 1000), (125, 1100))) == 0.25
+    assert measure.steal_share(measure.add_ticks((10, 100), (15, 100))) == 0.125
+    assert measure.steal_share((0, 0)) is None and measure.steal_share(None) is None
+    assert measure.ticks_between(None, (1, 2)) is None and measure.add_ticks((1, 2), None) is None
     for text in ("", "intr 1 2 3\n", "cpu  1 2 x 4 5 6 7 8\n", "cpu  1 2 3\n"):
         stat.write_text(text)
-        assert bench.machine_ticks(stat) is None, text
-    assert bench.machine_ticks(tmp_path / "absent") is None
+        assert measure.machine_ticks(stat) is None, text
+    assert measure.machine_ticks(tmp_path / "absent") is None
 
 
-@pytest.mark.skipif(bench.machine_ticks() is None, reason="no /proc/stat here")
+@pytest.mark.skipif(measure.machine_ticks() is None, reason="no /proc/stat here")
 def test_run_measured_reports_the_machines_steal():
-    run = bench.run_measured([sys.executable, "-c", "import time; time.sleep(0.3)"])
+    run = measure.run_measured([sys.executable, "-c", "import time; time.sleep(0.3)"])
     stolen, total = run.machine_ticks
     # 0.3 s on every CPU is at least 30 ticks of the machine (USER_HZ is 100 on Linux), some perhaps stolen.
     assert total >= 25 * (os.cpu_count() or 1) and 0 <= stolen <= total
@@ -257,8 +273,7 @@ def test_run_measured_reports_the_machines_steal():
 
 
 def test_targets_flag_rows_measured_while_the_machine_was_stolen():
-    from ffviz.bench import BenchRow
-    from ffviz.bench_report import markdown_line, targets
+    from ffviz.bench.report import BenchRow, markdown_line, targets
 
     quiet = BenchRow("a.mp4", "opencv", 640, 360, 60, seconds_runs=[10.0], steal_runs=[0.01, 0.02, 0.40])
     busy = BenchRow("a.mp4", "ffviz full", 640, 360, 60, seconds_runs=[20.0], steal_runs=[0.30, 0.33, 0.20])
@@ -270,7 +285,7 @@ def test_targets_flag_rows_measured_while_the_machine_was_stolen():
 
 
 def test_profile_attributes_the_cpu_to_every_stage_of_full_mode(tiny_clip, capsys):
-    from ffviz.bench_profile import STAGES
+    from ffviz.bench.profile import STAGES
 
     assert main(["bench", str(tiny_clip), "--profile", "--modes", "full"]) == 0
     stage_table, _, recording_table = capsys.readouterr().out.partition("by entity family")
@@ -295,12 +310,12 @@ def test_profile_attributes_the_cpu_to_every_stage_of_full_mode(tiny_clip, capsy
 
 
 def test_l1_modes_run_the_l1_path_and_the_profile_refuses_them(tmp_path):
-    command = bench.ffviz_command(tmp_path / "a.mp4", tmp_path / "o.mp4", "crop-l1")
-    assert command[command.index("--mode") + 1] == "crop" and command[command.index("--path") + 1] == "l1"
-    assert "--codec" not in command
-    mpeg4 = bench.ffviz_command(tmp_path / "a.mp4", tmp_path / "o.mp4", "full-mpeg4")
+    l1 = methods.ffviz_command(tmp_path / "a.mp4", tmp_path / "o.mp4", "crop-l1")
+    assert l1[l1.index("--mode") + 1] == "crop" and l1[l1.index("--path") + 1] == "l1"
+    assert "--codec" not in l1
+    mpeg4 = methods.ffviz_command(tmp_path / "a.mp4", tmp_path / "o.mp4", "full-mpeg4")
     assert mpeg4[mpeg4.index("--codec") + 1] == "mpeg4" and "--path" not in mpeg4
     from pipeline.errors import ConfigError
 
     with pytest.raises(ConfigError, match="crop-l1"):
-        bench._profile([], ["crop", "crop-l1"])
+        command._profile([], ["crop", "crop-l1"])

@@ -30,7 +30,7 @@ BAD = {
                           dict(reject_error=0.0), dict(structure_min=2.0), dict(structure_window_px=0)],
     fmm.MotionInpaintConfig: [dict(radius_px=0), dict(colour_epsilon=0.0)],
     local_flow.LocalFlowConfig: [dict(method="nope"), dict(dis_preset="nope")],
-    metrics.MetricsConfig: [dict(feature="surf"), dict(max_side=8)],
+    metrics.MetricsConfig: [dict(max_side=8)],
     mosaic.MosaicConfig: [dict(min_neighbours=1), dict(variance_threshold=0.0)],
     motion.MotionConfig: [dict(model="nope"), dict(refine="nope"), dict(ignore=((0, 0, 5, 5),)), dict(hist_step=0)],
     motion.IgnoreRegion: [dict(x=0, y=0, width=0, height=5), dict(x=-1, y=0, width=5, height=5),

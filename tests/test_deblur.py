@@ -96,7 +96,7 @@ def test_blurriness_ratios_survive_a_window_without_common_area():
 
 def test_deblurred_frames_are_closer_to_the_sharp_truth(clip):
     """Blurred frames gain >= 1 dB against the sharp truth (measured here: +3.2 to +3.6 dB, ratios b_t / b_t' ~2.2;
-    at 640x360 with 12 px blur, benchmarks/deblur_psnr.py: +3.4 to +7.3, mean +5.7). Sharp frames lose no more
+    at 640x360 with 12 px blur, benchmarks/quality/deblur_psnr.py: +3.4 to +7.3, mean +5.7). Sharp frames lose no more
     than 0.2 dB: with the default threshold on the ratio (1.1) they are untouched; with eq. 31's own threshold
     of 1, neighbours a hair sharper do contribute (measured: -0.13 to +0.44 dB)."""
     thesis_used = 0

@@ -409,11 +409,12 @@ def test_each_mode_plans_its_default_path_unless_given_one():
     """Every mode plans eq. 18's path at k = 60, crop mode's window then completed where it leaves the frames; a
     crop window inside every frame (--crop-fill 0, --crop-scale, --crop adaptive) plans auto (the L1 path inside its
     window where steadier) at k = 30; a path given is kept."""
-    from pipeline.config import DEFAULT_CROP_FILL, DEFAULT_PATHS
+    from pipeline.config import DEFAULT_CROP_FILL, DEFAULT_PATH, DEFAULT_RADIUS
 
     for mode in ("full", "none", "crop"):
         config = StabilizeConfig(mode=mode)
-        assert (config.smoothing.path, config.smoothing.radius_frames) == ("gaussian", 60) == (DEFAULT_PATHS[mode], 60)
+        planned = (config.smoothing.path, config.smoothing.radius_frames)
+        assert planned == ("gaussian", 60) == (DEFAULT_PATH, DEFAULT_RADIUS)
         assert config.crop_fill == (DEFAULT_CROP_FILL if mode == "crop" else 0.0)
     for crop in (HARD_CROP, adaptive_crop.CropConfig(kind="adaptive"), adaptive_crop.CropConfig(scale=0.9)):
         config = StabilizeConfig(mode="crop", crop=crop)

@@ -32,7 +32,7 @@ import numpy as np
 import pytest
 
 from ffviz import cli
-from ffviz.bench import measured_argv, read_measurement
+from ffviz.bench.measure import measured_argv, read_measurement
 from pipeline.evaluation import synthetic
 from pipeline.frames import Frame
 from pipeline.runtime.video_info import VideoInfo

@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 
-CACHE=$PWD/.cache/peers/videostab  # git-ignored; ffviz/bench.py looks for the binary here
+CACHE=$PWD/.cache/peers/videostab  # git-ignored; ffviz/bench/methods.py looks for the binary here
 BINARY=$CACHE/videostab
 SOURCE_DIR=/usr/share/doc/opencv-doc/examples/videostab
 

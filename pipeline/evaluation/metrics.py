@@ -49,19 +49,18 @@ _LOW_BINS = 5
 
 @dataclass(frozen=True)
 class MetricsConfig:
-    max_side: int = 320  # longer side of the image given to the detector (SIFT doubles it internally)
-    feature: str = "sift"  # "sift" or "orb"
-    ratio: float = 0.75  # Lowe's ratio test
-    ransac_px: float = 3.0  # RANSAC reprojection threshold, pixels of the downscaled image
-    n_features: int = 1000
-    min_matches: int = 10  # a pair needs more good matches than this
-    black_level: int = 7  # a pixel is black when R, G and B are all <= this ("< 8")
-    seam_px: int = 2  # band on either side of the input's outline that is neither real nor synthesized
-    min_synth_fraction: float = 0.005  # a pair with fewer synthesized pixels is left out of the flicker
+    """How frames are matched and pixels classed (docs/metrics.md)."""
+
+    max_side: int = 320  # px: longer side of the image given to SIFT (which doubles it internally)
+    ratio: float = 0.75  # Lowe's ratio test: best match distance over the second best's, at most this
+    ransac_px: float = 3.0  # px of the downscaled image: RANSAC's reprojection threshold
+    n_features: int = 1000  # keypoints SIFT keeps a frame, the strongest
+    min_matches: int = 10  # matches: a pair needs more good ones than this
+    black_level: int = 7  # 0..255: a pixel is black when R, G and B are all <= this ("< 8")
+    seam_px: int = 2  # px: band on either side of the input's outline that is neither real nor synthesized
+    min_synth_fraction: float = 0.005  # share of the frame: a pair synthesizing less is left out of the flicker
 
     def __post_init__(self) -> None:
-        if self.feature not in ("sift", "orb"):
-            raise ConfigError(f"feature must be 'sift' or 'orb', not {self.feature!r}")
         if self.max_side < 16:
             raise ConfigError(f"max_side must be at least 16, not {self.max_side}")
 
@@ -145,9 +144,7 @@ class _Features:
 
 
 def _detector(config: MetricsConfig):
-    if config.feature == "sift" and hasattr(cv2, "SIFT_create"):
-        return cv2.SIFT_create(config.n_features), cv2.NORM_L2
-    return cv2.ORB_create(config.n_features), cv2.NORM_HAMMING
+    return cv2.SIFT_create(config.n_features), cv2.NORM_L2
 
 
 def _detect(rgb: np.ndarray, detector, config: MetricsConfig) -> _Features:

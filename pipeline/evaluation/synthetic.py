@@ -67,37 +67,37 @@ _INTERP_PAD = 3.0
 class SyntheticConfig:
     """Everything that defines a synthetic clip; the clip is a deterministic function of this."""
 
-    width: int = 640
-    height: int = 360
+    width: int = 640  # px
+    height: int = 360  # px
     n_frames: int = 90
-    fps: float = 30.0
+    fps: float = 30.0  # frames a second
     image: str = "coffee"  # skimage.data name of the world photograph (coffee, astronaut, rocket, chelsea, ...)
-    seed: int = 0
+    seed: int = 0  # of every random draw: the shake, the object's path, the noise
     # Hand-held jitter (standard deviations over the clip).
     jitter_px: float = 6.0  # translation, per axis, pixels
     jitter_deg: float = 1.0  # roll, degrees
     jitter_scale: float = 0.01  # relative zoom
-    jitter_band_hz: tuple[float, float] = (1.5, 6.0)  # pass band of the jitter spectrum
+    jitter_band_hz: tuple[float, float] = (1.5, 6.0)  # Hz: pass band of the jitter spectrum
     # Gain of the jitter over time: equal stretches of the clip, eased between by a raised cosine over a tenth of
     # the clip (e.g. (0.1, 1.0): a calm first half, a shaky second). () -> 1 throughout (the stds above hold).
     jitter_envelope: tuple[float, ...] = ()
     # Intentional (smooth) motion.
-    pan_px_per_frame: float = 1.5  # steady horizontal pan
-    drift_px: float = 8.0  # amplitude of the slow sinusoidal drift (x; y gets 0.6x this)
-    drift_deg: float = 0.5  # amplitude of the slow intentional roll
-    drift_hz: float = 0.25  # frequency of the slow drift (well below the jitter band)
+    pan_px_per_frame: float = 1.5  # px a frame: steady horizontal pan
+    drift_px: float = 8.0  # px: amplitude of the slow sinusoidal drift (x; y gets 0.6x this)
+    drift_deg: float = 0.5  # degrees: amplitude of the slow intentional roll
+    drift_hz: float = 0.25  # Hz: frequency of the slow drift (well below the jitter band)
     # Moving foreground object.
-    moving_object: bool = True
+    moving_object: bool = True  # False: a static scene
     # "disc": the mission patch (below); "person": a person-sized figure wearing a texture cut from the world
     # photograph itself (same colour statistics as the background), walking irregularly across the view.
     object_kind: str = "disc"
-    object_radius_px: float = 40.0
+    object_radius_px: float = 40.0  # px: "disc": its radius
     object_sweep: float = 0.6  # fraction of the frame width its path spans (centred); > 1: enters/leaves through the borders
     person_size: tuple[float, float] = (0.22, 0.6)  # "person": width, height as fractions of the frame's
     person_speed_px: tuple[float, float] = (10.0, 25.0)  # "person": per-frame speed range, frame pixels
     # Motion blur.
     blurred_frames: tuple[int, ...] | None = None  # None -> default_blurred_frames(n_frames); () -> none
-    blur_length_px: float = 12.0
+    blur_length_px: float = 12.0  # px: length of the linear motion-blur kernel
     blur_angle_deg: float = 20.0  # direction (cos a, sin a) in y-down pixel coordinates (clockwise on screen)
     # Rolling shutter: row y of frame t is exposed with the camera of time t + readout * y / height (frames; the
     # camera between frames is the cubic spline through its per-frame parameters). 0: a global shutter.

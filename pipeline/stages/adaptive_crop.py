@@ -142,9 +142,10 @@ MAX_FILL = 0.1  # more than a tenth of the output synthesized is full mode's job
 class CropConfig:
     """How ``--mode crop`` chooses its window: one for the whole clip (``warping.largest_crop``) or adaptive."""
 
-    kind: str = "fixed"
+    kind: str = "fixed"  # "fixed": one window for the whole clip; "adaptive": its zoom follows the path
     zoom_speed: float = DEFAULT_ZOOM_SPEED  # adaptive: % of the frame's size the zoom may change a frame
-    # The L1 path's crop window (its scale of the frame, each way); None: the window the path without it keeps.
+    # The L1 path's crop window, its scale of the frame each way (0.9: 81 % of the area); None: the window the path
+    # without it keeps.
     scale: float | None = None
     # Eq. 18's path with a fixed window: the share of the output's pixels (mean over the clip) completion may
     # synthesize where the window leaves the frames (pipeline/config.py's crop_fill); 0: a window inside every

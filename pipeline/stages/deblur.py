@@ -40,7 +40,7 @@ from pipeline.stages.neighbours import TAP_SLACK, WarpedNeighbour, warp_neighbou
 from pipeline.imaging import INTENSITY_WEIGHTS, intensity
 from pipeline.stages.per_frame import PerFrame
 
-# Defaults chosen with benchmarks/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
+# Defaults chosen with benchmarks/quality/deblur_psnr.py (see the module docstring). Lengths are for 360 frame rows
 # and scale with the frame height (blur, in pixels, grows with the resolution).
 REFERENCE_HEIGHT = 360
 DEBLUR_ALPHA = 8.0
@@ -69,15 +69,18 @@ MIN_COMMON_FRACTION = 0.2
 
 @dataclass(frozen=True)
 class DeblurConfig:
-    enabled: bool = True
+    enabled: bool = True  # False: no deblurring (--no-deblur)
     alpha: float = DEBLUR_ALPHA  # eq. 31, in intensity units (0..255) of the alignment error E
     neighbour_frames: int = 6  # neighbours t-r..t+r are compared (<= the completion radius: their warps are reused)
     min_ratio: float = MIN_RATIO  # a neighbour contributes only where b_t / b_t' exceeds this (eq. 31: 1)
-    error_sigma_px: float = ERROR_SIGMA_PX  # low-pass of the signed difference before E is taken (0: eq. 29)
-    reject_error: float = REJECT_ERROR  # E above this marks another scene (moving object, misregistration)
-    reject_grow_px: int = REJECT_GROW_PX  # ... and so does everything this close to such a pixel
-    structure_min: float | None = STRUCTURE_MIN  # refuse where the local structure agreement is below this (None: off)
-    structure_window_px: int = STRUCTURE_WINDOW_PX  # half-width of its window
+    # px at 360 rows (Gaussian sigma): low-pass of the signed difference before E is taken (0: eq. 29 as written)
+    error_sigma_px: float = ERROR_SIGMA_PX
+    reject_error: float = REJECT_ERROR  # intensity 0..255: E above this marks another scene (moving object, ...)
+    reject_grow_px: int = REJECT_GROW_PX  # px at 360 rows: ... and so does everything this close to such a pixel
+    # Correlation-like score in [-1, 1] (``StructureGuard``): refuse where the local structure agreement is below this
+    # (None: off, the colour test alone).
+    structure_min: float | None = STRUCTURE_MIN
+    structure_window_px: int = STRUCTURE_WINDOW_PX  # px at 360 rows: half-width of its window
 
     def __post_init__(self) -> None:
         if not (self.alpha > 0 and math.isfinite(self.alpha)):
@@ -266,7 +269,7 @@ class StructureGuard:
     cannot tell from aligned), and flat windows whose mean levels differ by over 2 (another flat surface: a
     transfer could not sharpen anything there, only shift its colour). Specks of one cell are then dropped (a 3x3
     opening), so that isolated edge cells of a sharp neighbour do not punch holes in the transfer once dilated.
-    Only windows wholly inside the neighbour's coverage are judged. Thresholds: benchmarks/dynamic_scene.py.
+    Only windows wholly inside the neighbour's coverage are judged. Thresholds: benchmarks/quality/dynamic_scene.py.
 
     Works at the alignment error's resolution (ErrorGrid); the target's statistics are made once per frame.
     """

@@ -44,7 +44,7 @@ _WALL = np.int8(3)
 class MotionInpaintConfig:
     radius_px: int = 4  # H(p): known pixels within this distance contribute (see "Radius" above)
     colour_epsilon: float = 1.0  # eps in w = 1/(colour distance + eps), RGB 0..255 units
-    use_colour: bool = True
+    use_colour: bool = True  # False: eq. 24's distance factor alone, everywhere
 
     def __post_init__(self) -> None:
         if self.radius_px < 1:

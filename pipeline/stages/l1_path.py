@@ -59,11 +59,11 @@ class L1PathConfig:
     """How far an output frame may depart from its input, per parameter, and the program's window."""
 
     margin_fraction: float = 0.03  # translation bound (x and y) as a fraction of the frame's longer side
-    margin_deg: float = 2.0  # rotation bound
-    margin_scale: float = 0.04  # relative zoom bound
+    margin_deg: float = 2.0  # degrees: rotation bound
+    margin_scale: float = 0.04  # relative zoom bound (0.04: 4 %)
     window: int = 600  # frames per program; longer shots are solved in overlapping windows
     overlap: int = 90  # frames a window shares with the previous one (the first half pinned)
-    weights: tuple[float, float, float] = WEIGHTS  # of |R|, |D R|, |D^2 R|
+    weights: tuple[float, float, float] = WEIGHTS  # of |R|, |D R|, |D^2 R| in the program's cost (no unit)
     # Crop mode: the window of this scale of the frame, centred crop_offset px from the frame's centre, stays inside
     # every input frame. The translation margin is then this share of the room the window leaves (1: the window
     # alone bounds it); rotation and zoom keep their margins.

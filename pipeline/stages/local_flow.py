@@ -17,7 +17,7 @@ matched again by a translation search (``_rescue_large_motions``: DIS's pyramid 
 Why DIS "fast" and not the more accurate "medium": each pixel takes the candidate whose warp best explains its
 surroundings out of four neighbours', and the mosaic fills most of the missing area, so the completed pixels
 hardly depend on flow accuracy while "fast" runs 3x faster. Flow accuracy of every method and the completion
-PSNR behind this choice: docs/completion.md (``benchmarks/local_flow_choice.py``).
+PSNR behind this choice: docs/completion.md (``benchmarks/quality/local_flow_choice.py``).
 """
 
 from __future__ import annotations
@@ -45,21 +45,21 @@ class LocalFlowConfig:
     dis_preset: str = "fast"  # "ultrafast" | "fast" | "medium" (see the module docstring)
     dis_finest_scale: int | None = None  # pyramid level DIS stops at (0 = full resolution); None: the preset's
     # Farneback (OpenCV's recommended values, one more level for hand-held residuals).
-    farneback_levels: int = 4
-    farneback_window: int = 15
-    farneback_iterations: int = 3
+    farneback_levels: int = 4  # pyramid levels
+    farneback_window: int = 15  # px: averaging window
+    farneback_iterations: int = 3  # per level
     # Sparse LK on a regular grid (the thesis' choice), then bilinear interpolation of the grid.
-    lk_grid_step: int = 8
-    lk_window: int = 21
-    lk_levels: int = 3
+    lk_grid_step: int = 8  # px between grid points
+    lk_window: int = 21  # px: LK's search window
+    lk_levels: int = 3  # pyramid levels
     lk_max_fb_error_px: float = 0.5  # tracks that do not come back to their start are dropped
-    common_erosion_px: int = 3  # flow within this distance of an invalid pixel is unreliable
-    min_common_fraction: float = 0.01  # less common area than this (of the frame): no alignment error
+    common_erosion_px: int = 3  # px: flow within this distance of an invalid pixel is unreliable
+    min_common_fraction: float = 0.01  # share of the frame: with less common area, no alignment error
     # Large-motion rescue (see _rescue_large_motions): inside ``focus``, regions whose warp leaves a mean
     # intensity error above this (0..255, 5x5 mean) are matched again by a translation search; None: off.
     rescue_error: float | None = 20.0
-    rescue_search_px: int = 48  # translations up to this far (a best match on the search's edge is dropped)
-    rescue_min_px: int = 40  # smaller badly explained regions are left alone
+    rescue_search_px: int = 48  # px: translations up to this far (a best match on the search's edge is dropped)
+    rescue_min_px: int = 40  # pixels (an area): smaller badly explained regions are left alone
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
