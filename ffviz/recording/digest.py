@@ -249,12 +249,18 @@ def class_counts(classes: np.ndarray) -> np.ndarray:
 def filled_by_classes(result: CompletionResult) -> np.ndarray:
     """Class per pixel: 0 original, 1 mosaic, 2 fallback, FILLED_BY_BASE + offset where one neighbour filled it
     (local warp, carried on or as is: completion/source tells which)."""
-    classes = np.zeros(result.source.shape, np.uint8)
-    classes[result.source == SOURCE_MOSAIC] = 1
-    classes[result.source == SOURCE_FALLBACK] = 2
-    warped = from_a_neighbour(result.source)
+    source = np.ascontiguousarray(result.source, np.uint8)
+    classes = cv2.LUT(source, _FILLED_BY_OF_SOURCE)
+    warped = cv2.LUT(source, _FROM_A_NEIGHBOUR).view(bool)
     classes[warped] = (legends.FILLED_BY_BASE + result.filled_by[warped]).astype(np.uint8)
     return classes
+
+
+# completion source -> its filled_by class unless one neighbour filled it; -> whether one did (OpenCV's lookup: a
+# tenth of the comparisons' and np.isin's time)
+_FROM_A_NEIGHBOUR = from_a_neighbour(np.arange(256, dtype=np.uint8)).astype(np.uint8)
+_FILLED_BY_OF_SOURCE = np.zeros(256, np.uint8)
+_FILLED_BY_OF_SOURCE[[SOURCE_MOSAIC, SOURCE_FALLBACK]] = (1, 2)
 
 
 def _first_neighbour_flow(b: _Builder, result: CompletionResult) -> None:
