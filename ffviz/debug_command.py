@@ -9,7 +9,6 @@ choices, and nothing is recorded.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -118,7 +117,6 @@ def _print_table(rows: list[tuple[int, str, float]], debugger: Any) -> None:
         print(f"| {t} | {name} | {seconds:.1f} | {psnr} | {changed} |")
     print(f"wrote {debugger.rrd} ({len(rows)} frame variants); to look inside: {view_command(debugger.rrd)}",
           flush=True)
-    sys.stdout.flush()
 
 
 def _at(recording: Any, entity: str, t: int, psnr_cap: float) -> str:

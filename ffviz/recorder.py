@@ -160,19 +160,13 @@ class RerunRecorder:
     def keep(self, result: FrameResult) -> FrameResult:
         """On a rendering thread: the frame's digest at the recorded size, instead of its intermediates."""
         view = digest.digest(result, self._spec)
-        synthesized = result.completion.missing if result.completion is not None else None
-        view.synthesized_pixels = None if synthesized is None else int(np.count_nonzero(synthesized))
         return dataclasses.replace(result.without_intermediates(), digests={**result.digests, self._key: view})
 
     def on_frame(self, result: FrameResult) -> None:
         view = result.digests.get(self._key)
         if view is None:  # handed a result without going through keep (a single frame, a test)
             view = self.keep(result).digests[self._key]
-        share = None
-        if result.temporal is not None and view.synthesized_pixels is not None:
-            # the mean share over the synthesized pixels (the share is 0 on every other pixel)
-            share = float(result.temporal.share.sum()) / max(view.synthesized_pixels, 1)
-        digest.finish(view, result, self._spec, share)
+        digest.finish(view, result, self._spec)
         self._submit(view.nbytes, self._write_frame, view)
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:

@@ -89,9 +89,9 @@ def family(entity: str) -> str:
 class _Builder:
     """Collects a FrameView's parts, each timed (this thread's CPU) under its entity family."""
 
-    def __init__(self, spec: Spec, stamp: Stamp) -> None:
+    def __init__(self, spec: Spec, out: FrameView) -> None:
         self.spec, self.view = spec, spec.view
-        self.out = FrameView(stamp)
+        self.out = out
 
     @contextmanager
     def timed(self, entity: str) -> Iterator[None]:
@@ -183,7 +183,9 @@ def _finite(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def digest(result: FrameResult, spec: Spec) -> FrameView:
     """What the recording keeps of ``result``'s intermediates (its output and temporal parts come later: finish)."""
-    builder = _Builder(spec, result.stamp)
+    builder = _Builder(spec, FrameView(result.stamp))
+    if result.completion is not None:  # counted here: the run keeps no completion mask once the digest is made
+        builder.out.synthesized_pixels = int(np.count_nonzero(result.completion.missing))
     if result.input is not None:
         _trace(builder, "input", result.input.rgb)
         if spec.full:
@@ -201,13 +203,13 @@ def digest(result: FrameResult, spec: Spec) -> FrameView:
     return builder.out
 
 
-def finish(view: FrameView, result: FrameResult, spec: Spec, synthesized_share: float | None) -> FrameView:
-    """``view`` with the frame's final parts: the output as written and, where completion ran, the mean share of
-    its synthesized pixels averaged in from the frames next to it (``synthesized_share``)."""
-    builder = _Builder(spec, result.stamp)
-    builder.out = view
-    if synthesized_share is not None:
-        builder.scalar(ent.COMPLETION_TEMPORAL, synthesized_share)
+def finish(view: FrameView, result: FrameResult, spec: Spec) -> FrameView:
+    """``view`` with the frame's final parts: the output as written and, where temporal consistency ran, the mean
+    share of the synthesized pixels averaged in from the frames next to it (the share is 0 on every other pixel)."""
+    builder = _Builder(spec, view)
+    if result.temporal is not None and view.synthesized_pixels is not None:
+        share = float(result.temporal.share.sum()) / max(view.synthesized_pixels, 1)
+        builder.scalar(ent.COMPLETION_TEMPORAL, share)
     _trace(builder, "output", result.output)
     builder.frame(ent.OUTPUT_FRAME, result.output)
     return view

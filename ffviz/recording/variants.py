@@ -92,11 +92,7 @@ class VariantRecording:
     def log_variant(self, t: int, name: str, settings: Mapping[str, Any], result: FrameResult, seconds: float) -> None:
         """Frame ``t`` rendered as variant ``name`` (``settings``: what differs from the default) in ``seconds``."""
         self._add(name, settings)
-        view = digest.digest(result, self.spec)
-        share = None
-        if result.temporal is not None and view.synthesized_pixels:
-            share = float(result.temporal.share.sum()) / view.synthesized_pixels
-        digest.finish(view, result, self.spec, share)
+        view = digest.finish(digest.digest(result, self.spec), result, self.spec)
         self.rec.set_time(ent.FRAME_TIMELINE, sequence=t)
         self.rec.set_time(ent.VIDEO_TIME_TIMELINE, duration=result.stamp.time_s)
         for item in view.logged:
