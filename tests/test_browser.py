@@ -189,25 +189,7 @@ def test_the_web_viewer_renders_the_recording_in_chromium(recording, tmp_path):
         url = re.search(r"http://\S+", viewer.stdout.readline()).group(0)
         assert url.startswith(f"http://127.0.0.1:{web}/")
         wait_http(f"http://127.0.0.1:{web}/", 30)
-        chrome = subprocess.Popen(
-            [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-             "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
-             "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--remote-debugging-address=127.0.0.1",
-             "--remote-debugging-port=0", f"--window-size={WINDOW[0]},{WINDOW[1]}", "about:blank"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-        port_file = profile / "DevToolsActivePort"
-        deadline = time.monotonic() + 60
-        while not (port_file.is_file() and port_file.read_text().strip()):
-            assert chrome.poll() is None and time.monotonic() < deadline, "chromium did not start its DevTools server"
-            time.sleep(0.3)
-        port = int(port_file.read_text().split()[0])
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as response:
-            page = next(t for t in json.load(response) if t["type"] == "page")
-        devtools = DevTools(page["webSocketDebuggerUrl"])
-
-        devtools.call("Page.enable")
-        devtools.call("Emulation.setDeviceMetricsOverride", width=WINDOW[0], height=WINDOW[1], deviceScaleFactor=1,
-                      mobile=False)
+        chrome, devtools = _start_chromium(browser, profile)
         blank = decode_png(devtools.call("Page.captureScreenshot", format="png")["data"])
         devtools.call("Page.navigate", url=url)
         deadline = time.monotonic() + RENDER_TIMEOUT_S
@@ -260,25 +242,7 @@ def web_viewer_page(rrd: Path, profile: Path):
     try:
         url = re.search(r"http://\S+", viewer.stdout.readline()).group(0)
         wait_http(f"http://127.0.0.1:{web}/", 30)
-        chrome = subprocess.Popen(
-            [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-             "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
-             "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--remote-debugging-address=127.0.0.1",
-             "--remote-debugging-port=0", f"--window-size={WINDOW[0]},{WINDOW[1]}", "about:blank"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-        port_file = profile / "DevToolsActivePort"
-        deadline = time.monotonic() + 60
-        while not (port_file.is_file() and port_file.read_text().strip()):
-            assert chrome.poll() is None and time.monotonic() < deadline, "chromium did not start its DevTools server"
-            time.sleep(0.3)
-        port = int(port_file.read_text().split()[0])
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10) as response:
-            page = next(t for t in json.load(response) if t["type"] == "page")
-        devtools = DevTools(page["webSocketDebuggerUrl"])
-        devtools.call("Page.enable")
-        devtools.call("Emulation.setDeviceMetricsOverride", width=WINDOW[0], height=WINDOW[1], deviceScaleFactor=1,
-                      mobile=False)
-        devtools.call("Page.navigate", url=url)
+        chrome, devtools = _open_page(browser, url, profile)
         yield devtools, url, time.monotonic()
     finally:
         if devtools is not None:
@@ -370,17 +334,14 @@ def test_a_4k_recording_opens_on_frame_0_in_the_browser(uhd_recording, tmp_path)
     first, last = recording.image(ent.INPUT_FRAME, 0), recording.image(ent.INPUT_FRAME, 7)
     assert first.shape[:2] == (recorder.view.height, recorder.view.width) == (540, 960)
     with web_viewer_page(rrd, tmp_path / "profile") as (devtools, url, navigated):
-        deadline = navigated + OPEN_TIMEOUT_S
         scores = []
-        while True:
-            time.sleep(5)
-            shot = screenshot(devtools)
+
+        def on_frame_0(shot: np.ndarray) -> bool:
             scores.append(round(match_score(shot, first), 3))
-            if scores[-1] >= MATCH_SCORE or time.monotonic() > deadline:
-                break
-        cv2.imwrite(str(tmp_path / "open.png"), cv2.cvtColor(shot, cv2.COLOR_RGB2BGR))
-        assert scores[-1] >= MATCH_SCORE, f"frame 0 not on screen (scores: {scores}); {tmp_path}/open.png"
-        assert match_score(shot, first) > match_score(shot, last) - 0.05  # frame 0, not a later one
+            return scores[-1] >= MATCH_SCORE and match_score(shot, first) > match_score(shot, last) - 0.05
+
+        assert _until(devtools, on_frame_0, tmp_path / "open.png"), \
+            f"frame 0 not on screen (scores: {scores}); {tmp_path}/open.png"
 
 
 # -- ffviz snapshot: the native viewer, headless ----------------------------------------------------------------
@@ -534,7 +495,8 @@ def test_the_debugger_page_shows_a_new_variant_after_apply(tmp_path):
     assert recording.indices(variant_entity("alpha=4", ent.OUTPUT_FRAME)) == [150]
 
 
-def _open_page(browser: str, url: str, profile: Path):
+def _start_chromium(browser: str, profile: Path) -> tuple[subprocess.Popen, DevTools]:
+    """Headless Chromium on a blank page at WINDOW's size, and a DevTools session with it."""
     chrome = subprocess.Popen(
         [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
          "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run",
@@ -553,6 +515,11 @@ def _open_page(browser: str, url: str, profile: Path):
     devtools.call("Page.enable")
     devtools.call("Emulation.setDeviceMetricsOverride", width=WINDOW[0], height=WINDOW[1], deviceScaleFactor=1,
                   mobile=False)
+    return chrome, devtools
+
+
+def _open_page(browser: str, url: str, profile: Path) -> tuple[subprocess.Popen, DevTools]:
+    chrome, devtools = _start_chromium(browser, profile)
     devtools.call("Page.navigate", url=url)
     return chrome, devtools
 
