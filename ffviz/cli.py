@@ -366,9 +366,9 @@ def _add_recording_options(p: argparse.ArgumentParser, rrd_default: Path | None,
     p.add_argument("--lossless", action="store_true",
                    help="record images losslessly (larger files) (default: JPEG at quality 80)")
     p.add_argument("--record-size", type=_record_size, default=RECORD_SIZE, metavar="PX|full",
-                   help="long side in pixels of the recorded frames, masks and maps, or 'full' for the input's size; "
-                        "statistics and charts come from full resolution either way, traced frames (--frames) keep "
-                        "the input's size (default: %(default)s)")
+                   help="long side in pixels of the recorded frames, masks and maps (the traced frames' too), or "
+                        "'full' for the input's size; statistics and charts come from full resolution either way "
+                        "(default: %(default)s)")
     p.add_argument("--frames", type=_frame_list, default=None, metavar="T1,T2,...",
                    help="frame numbers (from 0) to follow through every stage in the recording (timelines 'stage' "
                         "and 'fmm_step'), or 'none' (default: 3 frames with missing area at --record full, none "

@@ -5,7 +5,7 @@ Each frame's intermediates are digested on the rendering thread as soon as the f
 ffviz/recording/digest.py): pictures at the recorded size (``--record-size``), masks and maps encoded, statistics
 from full resolution. The recorder's own thread (ffviz/recording/backlog.py, bounded in bytes) encodes the frame
 streams in order and logs. Traced frames (``trace_frames``; by default a few with missing area, chosen once the
-path is smoothed) are also logged stage by stage on the ``stage`` timeline, at the input's size.
+path is smoothed) are also logged stage by stage on the ``stage`` timeline.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ class RerunRecorder:
     ``jpeg_quality``: None records images losslessly (raw frames, float maps); otherwise the frame streams are H.264
     video streams, float maps' values 16-bit steps, and the sparse pictures (flow, traced frames) JPEGs at this
     quality. Masks are lossless either way. ``record_size``: the recorded pictures' long side in pixels (None: the
-    input's size); traced frames keep the input's size. ``trace_frames``: frames to follow through every stage; None:
+    input's size). ``trace_frames``: frames to follow through every stage; None:
     ``trace.DEFAULT_TRACED`` frames with missing area at level "full", none at "summary". ``threaded``: log on a
     thread of the recorder's own, holding at most ``backlog_bytes`` of work; an error there surfaces at the next call
     or at ``close()``.
@@ -446,7 +446,7 @@ class RerunRecorder:
         width, height = self._size
         size = self.view.describe(width, height) if width else "at the input's size"
         return (f"`--record {self.level}`, {stored}; pictures {size} (`--record-size`; statistics and charts from "
-                "the full-resolution results; traced frames at the input's size)")
+                "the full-resolution results)")
 
     def _log_meta(self, report: Any = None) -> None:
         """The about tab: a readable summary of the run, rewritten (static) as more becomes known."""

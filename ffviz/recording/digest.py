@@ -403,7 +403,7 @@ def deblur_source_classes(result: DeblurResult) -> np.ndarray:
     return classes
 
 
-# -- stage stepping (traced frames: native size, on the `stage` and `fmm_step` timelines) ---------------------------
+# -- stage stepping (traced frames, on the `stage` and `fmm_step` timelines, at the recorded size) -----------------
 
 def _trace(b: _Builder, stage: str, rgb: np.ndarray) -> None:
     """A traced frame's picture after ``stage`` on the ``stage`` timeline (frame = the traced frame)."""
@@ -412,12 +412,15 @@ def _trace(b: _Builder, stage: str, rgb: np.ndarray) -> None:
         return
     with b.timed(ent.TRACE):
         step = ent.TRACE_STAGES.index(stage)
-        height, width = rgb.shape[:2]
         times = ((ent.STAGE_TIMELINE, step),)
-        b.image(ent.trace_image(t), display_rgb(rgb, b.spec.colour), times)
-        b.log(ent.trace_label(t), rr.Boxes2D(array=[0, 0, width, height], array_format=rr.Box2DFormat.XYWH,
-                                             colors=[legends.LABEL_COLOUR], labels=[trace.stage_label(t, step)],
-                                             show_labels=True), times)
+        b.image(ent.trace_image(t), b.display(rgb), times)
+        b.log(ent.trace_label(t), _label(b.view, trace.stage_label(t, step)), times)
+
+
+def _label(view: ViewSize, text: str) -> rr.Boxes2D:
+    """A picture's label: a box around the whole of it, titled."""
+    return rr.Boxes2D(array=[0, 0, view.width, view.height], array_format=rr.Box2DFormat.XYWH,
+                      colors=[legends.LABEL_COLOUR], labels=[text], show_labels=True)
 
 
 def _trace_completion(b: _Builder, result: CompletionResult) -> None:
@@ -428,16 +431,11 @@ def _trace_completion(b: _Builder, result: CompletionResult) -> None:
     if not result.fills:
         return
     with b.timed(ent.TRACE):
-        t = b.out.stamp.index
-        inpainted = result.fills[0].inpainted
-        shown = display_rgb(result.mosaic.frame, b.spec.colour)
-        stabilized = np.where(result.missing[..., None], np.uint8(0), shown)
-        height, width = result.missing.shape
-        for step, filled, total, image in trace.fmm_band_images(stabilized, inpainted.flow, inpainted.order):
+        t, fill = b.out.stamp.index, result.fills[0]
+        flow, order, _ = inpainted_at(fill, b.view)
+        stabilized = np.where(b.view.mask(result.missing)[..., None], np.uint8(0), b.display(result.mosaic.frame))
+        for step, filled, total, image in trace.fmm_band_images(stabilized, flow, order):
             times = ((ent.FMM_STEP_TIMELINE, step),)
             b.image(ent.trace_fmm(t), image, times)
-            b.log(ent.trace_fmm_label(t), rr.Boxes2D(
-                array=[0, 0, width, height], array_format=rr.Box2DFormat.XYWH, colors=[legends.LABEL_COLOUR],
-                labels=[f"frame {t}: Fast Marching, {filled} of {total} pixels filled "
-                        f"(neighbour {result.fills[0].offset:+d})"], show_labels=True), times)
-
+            b.log(ent.trace_fmm_label(t), _label(b.view, f"frame {t}: Fast Marching, {filled} of {total} pixels "
+                                                          f"filled (neighbour {fill.offset:+d})"), times)
