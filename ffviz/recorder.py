@@ -42,11 +42,14 @@ RECORD_LEVELS: tuple[str, ...] = ("summary", "full")
 MAX_FEATURE_ARROWS = 300  # enough to read the motion, few enough to keep files small
 ROLLING_SHUTTER_GAIN = 5.0  # the bands' arrows are drawn this many times their length (shifts are a few px)
 ROLLING_SHUTTER_BANDS = 8
-# Chunks of up to 4 MB / 4096 rows: the SDK's batcher holds no more. A file-only recording flushes on those alone (a
-# tick would make the file's size depend on the machine's speed: every flush writes each entity's schema again); a
-# live view also flushes every 2 s so that the viewer follows the run.
+# Chunks of up to 4 MB / 4096 rows. A file-only recording has no tick (it would make the file's size depend on the
+# machine's speed: every flush writes each entity's schema again); a live view flushes every 2 s so that the viewer
+# follows the run.
 BATCHER = rr.ChunkBatcherConfig(flush_tick=3600.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
 LIVE_BATCHER = rr.ChunkBatcherConfig(flush_tick=2.0, flush_num_bytes=4 << 20, flush_num_rows=4096)
+# The SDK holds what it was given until a flush (rerun 0.41: its batcher's byte limit does not bound it), so the
+# recorder flushes each time this much was logged since the last: the SDK's part of the memory stays bounded.
+FLUSH_BYTES = 8 << 20  # each flush adds a few kB of schemas per entity to the file: about 1 % at this size
 
 
 class RerunRecorder:
@@ -97,6 +100,8 @@ class RerunRecorder:
         self.seconds_logging = 0.0  # wall time the recorder's thread spent encoding and logging
         self.cpu_by_family: Counter = Counter()  # CPU seconds by entity family: digests and the recorder's thread
         self._backlog = Backlog(backlog_bytes) if threaded else None
+        self.flush_bytes = FLUSH_BYTES
+        self._unflushed = 0  # bytes logged since the SDK was last flushed
 
     @property
     def lossless(self) -> bool:
@@ -192,13 +197,23 @@ class RerunRecorder:
             for timeline, _ in item.times:
                 self.rec.disable_timeline(timeline)
             self.cpu_by_family[digest.family(item.entity)] += time.thread_time() - started
+        self._unflushed += sum(item.nbytes for item in view.logged)
         for entity, rgb in view.streams:
             started = time.thread_time()
             track = self._tracks.get(entity)
             if track is None:
                 track = self._tracks[entity] = VideoTrack(self.rec, entity, self._fps)
+            sent = track.bytes
             track.add(view.stamp, rgb)
+            self._unflushed += track.bytes - sent
             self.cpu_by_family[entity] += time.thread_time() - started
+        self._flush_when_due()
+
+    def _flush_when_due(self) -> None:
+        """Hand the SDK's held data to the file once ``flush_bytes`` were logged since the last flush."""
+        if self._unflushed >= self.flush_bytes:
+            self.rec.flush()
+            self._unflushed = 0
 
     def _log_start(self) -> None:
         self._log_meta()

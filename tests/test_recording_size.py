@@ -146,3 +146,29 @@ def test_the_layout_lays_portrait_frames_side_by_side():
 
     assert frame_rows(blueprint.default_blueprint((), portrait=True)) == "Horizontal"
     assert frame_rows(blueprint.default_blueprint((), portrait=False)) == "Vertical"
+
+
+def test_the_recorder_hands_the_sdk_its_data_every_flush_bytes(tmp_path, monkeypatch):
+    """The SDK holds what it is given until a flush: the recorder flushes each time ``flush_bytes`` were logged, so
+    the recording's share of memory does not grow with the clip."""
+    clip = tmp_path / "clip.mp4"
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=320, height=180, n_frames=30)), clip)
+    recorder = RerunRecorder(tmp_path / "flushed.rrd", jpeg_quality=None)  # raw pictures: megabytes a frame
+    recorder.flush_bytes = 4 << 20
+    held_at_flush, logged_by_frame = [], []
+    flush, write = recorder.rec.flush, recorder._write_frame
+
+    def write_counting(view):
+        before, flushes = recorder._unflushed, len(held_at_flush)
+        write(view)
+        after = held_at_flush[-1] if len(held_at_flush) > flushes else recorder._unflushed
+        logged_by_frame.append(after - before)
+
+    monkeypatch.setattr(recorder.rec, "flush", lambda **kw: (held_at_flush.append(recorder._unflushed), flush(**kw)))
+    monkeypatch.setattr(recorder, "_write_frame", write_counting)
+    stabilize(clip, None, StabilizeConfig(), observer=recorder)
+    periodic = [held for held in held_at_flush if held >= recorder.flush_bytes]
+    assert len(periodic) >= sum(logged_by_frame) // (recorder.flush_bytes + max(logged_by_frame))
+    assert len(periodic) >= 5
+    assert max(periodic) < recorder.flush_bytes + max(logged_by_frame)
+    assert len(Recording.load(tmp_path / "flushed.rrd").indices(ent.OUTPUT_FRAME)) == 30
