@@ -1,0 +1,220 @@
+"""Benchmark: full mode's CPU a frame at two frame sizes, by stage and by call, fitted as a part fixed per frame plus
+a part per pixel (issue 43: the per-frame cost that does not shrink with the frame).
+
+The same content at both sizes, so that the fit is not a difference of content: the first --frames frames of --clip
+(640x360) re-encoded as they are and upscaled to 1920x1080 (ffmpeg, Lanczos, x264 CRF 16 preset fast, as
+speed_1080p.py makes its clip); --large-clip adds a real clip's first --frames frames at its own size as a check (its
+content differs: it is reported, not fitted). Each clip runs full mode in this process on one worker with OpenCV's
+threads off, under cProfile timed by this thread's CPU clock (as `ffviz bench --profile`, ffviz/bench/profile.py),
+after an unmeasured run on the clip's first 8 frames (imports, numba's kernels for the clip's array layouts). A
+stage's CPU: the chain's own per-frame timers (FrameResult.cpu_seconds: warp, completion, deblur, temporal) and
+completion's parts as the cumulative CPU of the functions that make them; encode adds the process's CPU beyond this
+thread's (x264's threads). The profiler costs about a microsecond a Python call, counted in the figures.
+
+Fit: with P the frame's megapixels, ms a frame = fixed + per_mp * P from the two sizes; fixed is what a frame costs
+whatever its size (work at a fixed working size, per neighbour and per call).
+
+Usage: python -m benchmarks.speed.two_size_profile [--clip ../shared/videos/vplab_C.avi] [--frames 60]
+       [--large-clip PATH] [--top 25] [--report docs/benchmarks-speed.md | --no-report]
+"""
+
+from __future__ import annotations
+
+import cProfile
+import pstats
+import resource
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+
+from benchmarks import common
+from pipeline.runtime import memory
+
+VIDEOS = common.VIDEOS
+WARM_UP_FRAMES = 8
+
+
+def _reencoded(clip: Path, frames: int, out: Path, size: tuple[int, int] | None = None) -> Path:
+    """The first ``frames`` frames of ``clip`` (at ``size``, Lanczos; None: its own) as H.264 CRF 16."""
+    scale = ["-vf", f"scale={size[0]}:{size[1]}:flags=lanczos"] if size else []
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-frames:v", str(frames), "-an", *scale,
+                    "-c:v", "libx264", "-crf", "16", "-preset", "fast", "-pix_fmt", "yuv420p", str(out)], check=True)
+    return out
+
+
+def _parts() -> list[tuple[str, tuple]]:
+    """(label, functions whose cumulative CPU is that part) for the parts not timed by the chain itself. Within
+    completion, in nesting order: a later part is not inside an earlier one."""
+    from pipeline import chain
+    from pipeline.runtime import video_reader, video_writer
+    from pipeline.stages import candidates, completion, fallback, fmm, local_flow, local_warp, motion
+
+    return [("decode", (video_reader.VideoReader.__iter__,)),
+            ("motion", (motion.prepare, motion.estimate, motion.choose_background)),
+            ("path", (chain.plan_path,)),
+            ("registration (ECC per neighbour)", (completion.register_neighbours,)),
+            ("samples at the missing pixels", (candidates.Evidence.__init__,)),
+            ("mosaic (eqs. 20-22)", (completion._mosaic,)),
+            ("neighbour priority (eq. 23)", (local_warp.priority,)),
+            ("local flow (DIS + rescue)", (local_flow.local_flow,)),
+            ("motion inpainting (FMM)", (fmm.inpaint_motion,)),
+            ("fallback", (fallback.smooth_fill,)),
+            ("encode (this thread)", (video_writer.VideoWriter.write, video_writer.VideoWriter.close))]
+
+
+@dataclass
+class SizeProfile:
+    name: str
+    width: int
+    height: int
+    frames: int
+    stages_ms: dict[str, float]  # stage -> CPU ms a frame
+    calls: dict[tuple, tuple[int, float, str]]  # function key -> (calls, tottime s, label)
+
+    @property
+    def megapixels(self) -> float:
+        return self.width * self.height / 1e6
+
+
+def _cumulative(stats: pstats.Stats, functions: tuple) -> float:
+    keys = {(f.__code__.co_filename, f.__code__.co_firstlineno, f.__code__.co_name) for f in functions}
+    return sum(entry[3] for key, entry in stats.stats.items() if key in keys)
+
+
+def _label(key: tuple) -> str:
+    filename, line, name = key
+    if filename == "~":
+        return name.replace("<", "").replace(">", "")
+    parts = Path(filename).parts
+    where = "/".join(parts[parts.index("pipeline"):]) if "pipeline" in parts else Path(filename).name
+    return f"{where}:{line} {name}"
+
+
+def _process_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _run(clip: Path, workdir: Path, profiled: bool):
+    from ffviz.bench.profile import _StageTimes
+    from pipeline.config import StabilizeConfig
+    from pipeline.runtime.observer import Observers
+    from pipeline.stabilize import stabilize
+
+    times = _StageTimes()
+    profile = cProfile.Profile(time.thread_time)
+    threads_before = cv2.getNumThreads()
+    cv2.setNumThreads(0)  # OpenCV's work on the calling thread, where it is attributed
+    process_before, thread_before = _process_cpu(), time.thread_time()
+    try:
+        call = (lambda *a, **k: profile.runcall(stabilize, *a, **k)) if profiled else stabilize
+        call(clip, workdir / "out.mp4", StabilizeConfig(mode="full"), observer=Observers(times), overwrite=True,
+             workers=1)
+    finally:
+        cv2.setNumThreads(threads_before)
+    return pstats.Stats(profile) if profiled else None, times, _process_cpu() - process_before, \
+        time.thread_time() - thread_before
+
+
+def profile_size(name: str, clip: Path, warm_up: Path, workdir: Path) -> SizeProfile:
+    """Full mode's CPU a frame on ``clip`` by stage and by call, after an unmeasured run on ``warm_up``."""
+    _run(warm_up, workdir, profiled=False)
+    stats, times, process_cpu, thread_cpu = _run(clip, workdir, profiled=True)
+    frames = max(times.frames, 1)
+    seconds = {label: _cumulative(stats, functions) for label, functions in _parts()}
+    completion_parts = [label for label, _ in _parts()][3:-1]
+    completion = times.cpu.get("completion", 0.0)
+    stages = {"decode": seconds["decode"], "motion": seconds["motion"], "path": seconds["path"],
+              "warp (frame, neighbours)": times.cpu.get("warp", 0.0),
+              **{label: seconds[label] for label in completion_parts},
+              "candidates' sampling, errors, choice": max(completion - sum(seconds[p] for p in completion_parts), 0),
+              "temporal consistency": times.cpu.get("temporal", 0.0),
+              "deblur": times.cpu.get("deblur", 0.0),
+              "encode (x264 threads + writer)": seconds["encode (this thread)"] + max(process_cpu - thread_cpu, 0.0)}
+    stages["rest (orchestration, observers)"] = max(process_cpu - sum(stages.values()), 0.0)
+    stages["total (process)"] = process_cpu
+    height, width = cv2.VideoCapture(str(clip)).read()[1].shape[:2]
+    calls = {key: (entry[1], entry[2], _label(key)) for key, entry in stats.stats.items()}
+    return SizeProfile(name, width, height, frames, {k: 1000 * v / frames for k, v in stages.items()}, calls)
+
+
+def _fit(small: float, large: float, p_small: float, p_large: float) -> tuple[float, float]:
+    """(fixed ms, ms a megapixel) of the line through (p_small, small) and (p_large, large)."""
+    per_mp = (large - small) / (p_large - p_small)
+    return small - per_mp * p_small, per_mp
+
+
+def stage_table(profiles: list[SizeProfile]) -> list[str]:
+    small, large = profiles[0], profiles[1]
+    header = ["stage", *(f"{p.name} ms" for p in profiles), "fixed ms", "ms a MP", "fixed share at 640x360"]
+    lines = ["| " + " | ".join(header) + " |", "|---|" + "---|" * (len(header) - 1)]
+    for stage in small.stages_ms:
+        fixed, per_mp = _fit(small.stages_ms[stage], large.stages_ms[stage], small.megapixels, large.megapixels)
+        share = fixed / small.stages_ms[stage] if small.stages_ms[stage] > 0 else 0.0
+        lines.append(f"| {stage} | " + " | ".join(f"{p.stages_ms[stage]:.1f}" for p in profiles)
+                     + f" | {fixed:.1f} | {per_mp:.1f} | {100 * min(max(share, 0.0), 1.0):.0f} % |")
+    return lines
+
+
+def call_table(profiles: list[SizeProfile], top: int) -> list[str]:
+    """The ``top`` calls by own CPU a frame at the smaller size: calls a frame, own CPU ms a frame at each size,
+    and the fit of the two sizes with the same content."""
+    small, large = profiles[0], profiles[1]
+    ranked = sorted(small.calls, key=lambda key: small.calls[key][1], reverse=True)[:top]
+    lines = ["| call | calls a frame | " + " | ".join(f"{p.name} ms" for p in profiles)
+             + " | us a call (640x360) | fixed ms | ms a MP |", "|---|---|" + "---|" * (len(profiles) + 3)]
+    for key in ranked:
+        calls, own, label = small.calls[key]
+        at = [1000 * p.calls.get(key, (0, 0.0, ""))[1] / p.frames for p in profiles]
+        fixed, per_mp = _fit(at[0], at[1], small.megapixels, large.megapixels)
+        lines.append(f"| `{label}` | {calls / small.frames:.1f} | " + " | ".join(f"{ms:.1f}" for ms in at)
+                     + f" | {1e6 * own / max(calls, 1):.0f} | {fixed:.1f} | {per_mp:.1f} |")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = common.parser(__doc__)
+    common.add_clip(parser, VIDEOS / "vplab_C.avi")
+    common.add_frames(parser, 60)
+    parser.add_argument("--large-clip", type=Path, default=None,
+                        help="a real clip at its own size, reported beside the fitted pair (default: none)")
+    parser.add_argument("--top", type=int, default=25, help="calls in the per-call table (default: %(default)s)")
+    common.add_report(parser, common.SPEED_REPORT)
+    args = parser.parse_args(argv)
+    if not args.clip.is_file() or shutil.which("ffmpeg") is None:
+        print(f"{args.clip} or ffmpeg not found: nothing measured")
+        return 0
+    memory.reuse_freed_memory()  # as `ffviz` does at its start (pipeline/runtime/memory.py)
+    started = common.machine_line()
+    with tempfile.TemporaryDirectory(prefix="ffviz-two-size-") as tmp:
+        work = Path(tmp)
+        inputs = [("640x360", args.clip, None), ("1920x1080", args.clip, (1920, 1080))]
+        if args.large_clip is not None and args.large_clip.is_file():
+            inputs.append((args.large_clip.stem, args.large_clip, None))
+        profiles = []
+        for name, clip, size in inputs:
+            measured = _reencoded(clip, args.frames, work / f"{name}.mp4", size)
+            warm_up = _reencoded(clip, WARM_UP_FRAMES, work / f"{name}.warm.mp4", size)
+            profiles.append(profile_size(name, measured, warm_up, work))
+            print(f"{name}: {profiles[-1].stages_ms['total (process)']:.0f} CPU ms a frame", flush=True)
+    names = ", ".join(f"{p.name} ({p.width}x{p.height})" for p in profiles)
+    lines = ["## Full mode at two sizes: the part of a frame's CPU that does not shrink with the frame", "",
+             f"Written by `benchmarks/speed/two_size_profile.py` ({started}): the first {args.frames} frames of "
+             f"{args.clip.name} as they are and upscaled to 1920x1080 (the same content, the fit's two points)"
+             + (f", and {profiles[2].name} at its own size (other content: not fitted)" if len(profiles) > 2 else "")
+             + f"; full mode, one worker in process, OpenCV's threads off, under cProfile (its cost included). "
+             "Fixed and ms a MP: ms a frame = fixed + ms a MP x the frame's megapixels, through the two sizes.",
+             "", f"CPU ms a frame by stage ({names}):", "", *stage_table(profiles), "",
+             f"The {args.top} calls with the most own CPU at 640x360 (own: without the calls they make):", "",
+             *call_table(profiles, args.top)]
+    common.publish("two-size-profile", lines, common.report_path(args), common.SPEED_HEADER)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
