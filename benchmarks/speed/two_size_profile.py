@@ -121,6 +121,74 @@ def _run(clip: Path, workdir: Path, profiled: bool):
         time.thread_time() - thread_before
 
 
+class PairTally:
+    """Each flow and local registration a run computes, by the two original frames it relates: (kind, target t,
+    frames a and b, this thread's CPU s). Installed by patching the functions that make them (module attributes,
+    looked up at each call), for one run on one worker; ``restore`` undoes it."""
+
+    def __init__(self) -> None:
+        from pipeline import chain
+        from pipeline.stages import candidates, completion, local_warp
+
+        self.records: list[tuple[str, int, int, int, float]] = []
+        self.t = -1
+        self.offset = 0
+        tally = self
+        self._patched = [(chain.FrameChain, "__call__"), (local_warp, "neighbour_fill"),
+                         (local_warp, "_flow_in_box"), (candidates.CarriedOn, "_candidate"),
+                         (completion, "_registered")]
+        self._originals = [getattr(owner, name) for owner, name in self._patched]
+        frame_call, fill, flow_in_box, carried, registered = self._originals
+
+        def timed(kind, a, b, call, *args, **kwargs):
+            start = time.thread_time()
+            result = call(*args, **kwargs)
+            tally.records.append((kind, tally.t, a, b, time.thread_time() - start))
+            return result
+
+        def frame_call_(chain_self, window):
+            tally.t = window.centre.index
+            return frame_call(chain_self, window)
+
+        def fill_(neighbour, *args, **kwargs):
+            tally.offset = neighbour.offset
+            return fill(neighbour, *args, **kwargs)
+
+        chain.FrameChain.__call__ = frame_call_
+        local_warp.neighbour_fill = fill_
+        local_warp._flow_in_box = lambda *a, **k: timed("local warp (flow + FMM)", tally.t, tally.t + tally.offset,
+                                                        flow_in_box, *a, **k)
+        candidates.CarriedOn._candidate = lambda self_, contest, near, far, *a, **k: timed(
+            "carried on (flow)", tally.t + near.offset, tally.t + far.offset, carried, self_, contest, near, far,
+            *a, **k)
+        completion._registered = lambda neighbour, *a, **k: timed(
+            "registration (ECC)", tally.t, tally.t + neighbour.offset, registered, neighbour, *a, **k)
+
+    def restore(self) -> None:
+        for (owner, name), original in zip(self._patched, self._originals):
+            setattr(owner, name, original)
+
+    def table(self, frames: int) -> list[str]:
+        """Per kind: calls and CPU ms a frame, and the CPU ms a frame spent on pairs of original frames that some
+        other target frame relates too (by any kind of flow or registration, either way round): what computing each
+        pair once could save at most, before the cost of carrying it into each target's coordinates."""
+        targets_of: dict[frozenset, set[int]] = {}
+        for _, t, a, b, _ in self.records:
+            targets_of.setdefault(frozenset((a, b)), set()).add(t)
+        lines = ["| kind | calls a frame | CPU ms a frame | distinct pairs a frame | CPU ms a frame on pairs another "
+                 "target relates too |", "|---|---|---|---|---|"]
+        for kind in dict.fromkeys(record[0] for record in self.records):
+            mine = [r for r in self.records if r[0] == kind]
+            shared = sum(cpu for _, t, a, b, cpu in mine if len(targets_of[frozenset((a, b))]) > 1)
+            pairs = {frozenset((a, b)) for _, _, a, b, _ in mine}
+            lines.append(f"| {kind} | {len(mine) / frames:.1f} | {1000 * sum(r[4] for r in mine) / frames:.1f} | "
+                         f"{len(pairs) / frames:.1f} | {1000 * shared / frames:.1f} |")
+        every_pair = {frozenset((a, b)) for _, _, a, b, _ in self.records}
+        lines += ["", f"All kinds: {len(self.records) / frames:.1f} calls a frame on {len(every_pair) / frames:.1f} "
+                  "distinct pairs of original frames a frame."]
+        return lines
+
+
 def profile_size(name: str, clip: Path, warm_up: Path, workdir: Path) -> SizeProfile:
     """Full mode's CPU a frame on ``clip`` by stage and by call, after an unmeasured run on ``warm_up``."""
     _run(warm_up, workdir, profiled=False)
@@ -202,6 +270,11 @@ def main(argv: list[str] | None = None) -> int:
             warm_up = _reencoded(clip, WARM_UP_FRAMES, work / f"{name}.warm.mp4", size)
             profiles.append(profile_size(name, measured, warm_up, work))
             print(f"{name}: {profiles[-1].stages_ms['total (process)']:.0f} CPU ms a frame", flush=True)
+        tally = PairTally()
+        try:  # a run of its own, unprofiled: the profiler's cost would count in each call's CPU
+            _run(work / "640x360.mp4", work, profiled=False)
+        finally:
+            tally.restore()
     names = ", ".join(f"{p.name} ({p.width}x{p.height})" for p in profiles)
     lines = ["## Full mode at two sizes: the part of a frame's CPU that does not shrink with the frame", "",
              f"Written by `benchmarks/speed/two_size_profile.py` ({started}): the first {args.frames} frames of "
@@ -211,7 +284,10 @@ def main(argv: list[str] | None = None) -> int:
              "Fixed and ms a MP: ms a frame = fixed + ms a MP x the frame's megapixels, through the two sizes.",
              "", f"CPU ms a frame by stage ({names}):", "", *stage_table(profiles), "",
              f"The {args.top} calls with the most own CPU at 640x360 (own: without the calls they make):", "",
-             *call_table(profiles, args.top)]
+             *call_table(profiles, args.top), "",
+             "The relations between two frames that completion computes at 640x360 (a run of its own, without the "
+             "profiler; a pair is two original frames, either way round, whichever target frame's coordinates it "
+             "was computed in):", "", *tally.table(profiles[0].frames)]
     common.publish("two-size-profile", lines, common.report_path(args), common.SPEED_HEADER)
     return 0
 
