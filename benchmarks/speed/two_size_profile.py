@@ -14,8 +14,13 @@ thread's (x264's threads). The profiler costs about a microsecond a Python call,
 Fit: with P the frame's megapixels, ms a frame = fixed + per_mp * P from the two sizes; fixed is what a frame costs
 whatever its size (work at a fixed working size, per neighbour and per call).
 
+Then, at 640x360: each flow and local registration completion computes, by the pair of original frames it relates
+(``PairTally``: how often the same pair is computed again in another target frame's coordinates), in a run of its own
+without the profiler; and the start-up (``startup_table``): whole commands in fresh interpreters, measured from outside
+as `ffviz bench` measures (ffviz/bench/measure.py), --repeat times, medians.
+
 Usage: python -m benchmarks.speed.two_size_profile [--clip ../shared/videos/vplab_C.avi] [--frames 60]
-       [--large-clip PATH] [--top 25] [--report docs/benchmarks-speed.md | --no-report]
+       [--large-clip PATH] [--top 25] [--repeat 3] [--report docs/benchmarks-speed.md | --no-report]
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ import pstats
 import resource
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -245,6 +251,38 @@ def call_table(profiles: list[SizeProfile], top: int) -> list[str]:
     return lines
 
 
+# Start-up, each in a fresh interpreter: what a run pays before and besides its frames. _clip_round is one of the
+# pipeline's numba kernels (already in numba's on-disk cache): its first call is numba's own start.
+NUMBA_FIRST_CALL = ("import numpy as np; import ffviz.cli; from pipeline.runtime import colour; "
+                    "colour._clip_round(np.zeros((2, 2, 3), np.float32))")
+
+
+def startup_table(clip: Path, work: Path, repeat: int) -> list[str]:
+    """CPU and wall s of the process tree (median of ``repeat``) for: Python alone, importing the CLI, that and
+    numba's first call, and `ffviz stabilize` on ``clip`` (a few frames) in --mode none and full."""
+    import statistics
+
+    from ffviz.bench.measure import run_measured
+    from ffviz.bench.methods import ffviz_command
+
+    commands = {"Python alone": [sys.executable, "-c", "pass"],
+                "import ffviz.cli": [sys.executable, "-c", "import ffviz.cli"],
+                "import ffviz.cli + numba's first call (a cached kernel)": [sys.executable, "-c", NUMBA_FIRST_CALL],
+                f"ffviz stabilize, {WARM_UP_FRAMES} frames, --mode none": ffviz_command(clip, work / "none.mp4", "none"),
+                f"ffviz stabilize, {WARM_UP_FRAMES} frames, --mode full": ffviz_command(clip, work / "full.mp4", "full")}
+    runs: dict[str, list] = {name: [] for name in commands}
+    for name, command in commands.items():  # once unmeasured: numba's cache and the page cache warm
+        run_measured(command, cwd=common.ROOT)
+    for _ in range(repeat):
+        for name, command in commands.items():
+            runs[name].append(run_measured(command, cwd=common.ROOT))
+    lines = ["| command | CPU s | wall s |", "|---|---|---|"]
+    for name, measured in runs.items():
+        lines.append(f"| {name} | {statistics.median(r.cpu_seconds for r in measured):.2f} | "
+                     f"{statistics.median(r.seconds for r in measured):.2f} |")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = common.parser(__doc__)
     common.add_clip(parser, VIDEOS / "vplab_C.avi")
@@ -252,6 +290,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--large-clip", type=Path, default=None,
                         help="a real clip at its own size, reported beside the fitted pair (default: none)")
     parser.add_argument("--top", type=int, default=25, help="calls in the per-call table (default: %(default)s)")
+    common.add_repeat(parser, 3)
     common.add_report(parser, common.SPEED_REPORT)
     args = parser.parse_args(argv)
     if not args.clip.is_file() or shutil.which("ffmpeg") is None:
@@ -275,6 +314,7 @@ def main(argv: list[str] | None = None) -> int:
             _run(work / "640x360.mp4", work, profiled=False)
         finally:
             tally.restore()
+        startup = startup_table(work / "640x360.warm.mp4", work, args.repeat)
     names = ", ".join(f"{p.name} ({p.width}x{p.height})" for p in profiles)
     lines = ["## Full mode at two sizes: the part of a frame's CPU that does not shrink with the frame", "",
              f"Written by `benchmarks/speed/two_size_profile.py` ({started}): the first {args.frames} frames of "
@@ -287,7 +327,9 @@ def main(argv: list[str] | None = None) -> int:
              *call_table(profiles, args.top), "",
              "The relations between two frames that completion computes at 640x360 (a run of its own, without the "
              "profiler; a pair is two original frames, either way round, whichever target frame's coordinates it "
-             "was computed in):", "", *tally.table(profiles[0].frames)]
+             "was computed in):", "", *tally.table(profiles[0].frames), "",
+             f"Start-up: whole commands in a fresh interpreter, CPU and wall s of the process tree (median of "
+             f"{args.repeat}; ffviz/bench/measure.py), the {WARM_UP_FRAMES}-frame clip at 640x360:", "", *startup]
     common.publish("two-size-profile", lines, common.report_path(args), common.SPEED_HEADER)
     return 0
 
