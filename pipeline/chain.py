@@ -361,10 +361,12 @@ class FrameChain:
         if smoothed.neighbours:
             # The output is the completed frame after deblurring: the synthesized pixels take the average plus
             # deblurring's change to them (none where deblurring did not run).
-            synthesized = completed.synthesized
-            change = smoothed.frame[synthesized].astype(np.int16) - completed.frame[synthesized]
+            synthesized = np.flatnonzero(completed.synthesized)  # (flat indices: a boolean mask is read per use)
+            change = (smoothed.frame.reshape(-1, 3)[synthesized].astype(np.int16)
+                      - completed.frame.reshape(-1, 3)[synthesized])
             output = output.copy()
-            output[synthesized] = np.clip(result.output[synthesized] + change, 0, 255).astype(np.uint8)
+            output.reshape(-1, 3)[synthesized] = np.clip(result.output.reshape(-1, 3)[synthesized] + change, 0,
+                                                         255).astype(np.uint8)
         cpu = {**result.cpu_seconds, "temporal": time.thread_time() - clock}
         if self.keep is None:
             return FrameResult(result.stamp, result.pts, output, cpu_seconds=cpu)

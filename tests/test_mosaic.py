@@ -196,3 +196,58 @@ def test_majority_median_leaves_out_what_a_minority_of_neighbours_showed():
     assert ok[0] and (median[0] == 100).all()
     ok, median, member = judge([100, 102, 104, 106])  # even majority (3 of 4): the two middle ones' mean
     assert ok[0] and member[:, 0].sum() == 3
+
+
+def _majority_median_numpy(colours, values, valid, variance_threshold):
+    """majority_median as numpy arrays compute it (its first implementation): the reference the compiled search
+    must equal bit for bit."""
+    from pipeline.stages.mosaic import _middle
+
+    n, m = values.shape
+    count = valid.sum(axis=0)
+    order = np.argsort(np.where(valid, values, np.inf), axis=0, kind="stable")
+    ordered = np.where(np.arange(n)[:, None] < count, np.take_along_axis(values, order, axis=0), 0).astype(np.float64)
+    first = np.vstack([np.zeros((1, m)), np.cumsum(ordered, axis=0)])
+    second = np.vstack([np.zeros((1, m)), np.cumsum(ordered ** 2, axis=0)])
+    k = count // 2 + 1
+    columns = np.arange(m)
+    best = np.full(m, np.inf)
+    start = np.zeros(m, np.int64)
+    for s in range(n):
+        end = np.minimum(s + k, n)
+        total = first[end, columns] - first[s, columns]
+        variance = (second[end, columns] - second[s, columns] - total ** 2 / k) / np.maximum(k - 1, 1)
+        better = (s + k <= count) & (variance < best)
+        best = np.where(better, variance, best)
+        start = np.where(better, s, start)
+    ok = (count >= 3) & (best < variance_threshold)
+    last = np.minimum(start + k - 1, n - 1)
+    lower = order[np.minimum(start + (k - 1) // 2, n - 1), columns]
+    upper = order[np.minimum(start + k // 2, n - 1), columns]
+    rank = np.argsort(order, axis=0)
+    return ok, _middle(colours, lower, upper), valid & (rank >= start) & (rank <= last) & ok
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 12])
+def test_majority_median_equals_its_numpy_form(n):
+    """The compiled search gives numpy's results exactly: samples with ties (few grey levels), invalid ones,
+    columns with 0..n samples, uint8 and float32 colours."""
+    from pipeline.imaging import intensity
+    from pipeline.stages.mosaic import majority_median
+
+    rng = np.random.default_rng(n)
+    m = 4000
+    for levels in (4, 256):
+        colours = (rng.integers(0, levels, (n, m, 3)) * (255 // (levels - 1))).astype(np.uint8)
+        valid = rng.random((n, m)) < rng.random(m)  # every share of valid samples, some columns none
+        values = intensity(colours)
+        for threshold in (30.0, 100.0, 1e9):
+            expected = _majority_median_numpy(colours, values, valid, threshold)
+            for got, want in zip(majority_median(colours, values, valid, threshold), expected):
+                np.testing.assert_array_equal(got, want)
+            deep = colours.astype(np.float32) / 255
+            for got, want in zip(majority_median(deep, values, valid, threshold),
+                                 _majority_median_numpy(deep, values, valid, threshold)):
+                np.testing.assert_array_equal(got, want)
+        if n >= 3:  # (fewer samples are never judged)
+            assert expected[0].any() and not expected[0].all()

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from numba import njit
 
 from pipeline.errors import ConfigError
 from pipeline.imaging import intensity
@@ -152,28 +153,53 @@ def majority_median(colours: np.ndarray, values: np.ndarray, valid: np.ndarray, 
     Why: where an object passed in front of the background in a few neighbours, eq. 20 over all of them rejects a
     pixel the others agree on. Returns (ok (m,) bool: three or more samples and such a majority, median (m, 3),
     member (n, m) bool: the samples in the run)."""
+    ok, lower, upper, member = _tightest_majority(np.ascontiguousarray(values), np.ascontiguousarray(valid, np.bool_),
+                                                  float(variance_threshold))
+    return ok, _middle(colours, lower, upper), member
+
+
+@njit(cache=True, nogil=True)
+def _tightest_majority(values: np.ndarray, valid: np.ndarray, variance_threshold: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """majority_median's search, a column at a time: the valid samples in stable intensity order (invalid ones last),
+    prefix sums of their intensities and squares in float64, and the run of k = count // 2 + 1 with the lowest eq.
+    20 variance (the first on a tie). Returns (ok (m,), the run's two middle samples' rows lower and upper (m,), the
+    run's members (n, m)). The arithmetic is numpy's for the same formulas, in the same order: the same bits."""
     n, m = values.shape
-    count = valid.sum(axis=0)
-    order = np.argsort(np.where(valid, values, np.inf), axis=0, kind="stable")
-    ordered = np.where(np.arange(n)[:, None] < count, np.take_along_axis(values, order, axis=0), 0).astype(np.float64)
-    first = np.vstack([np.zeros((1, m)), np.cumsum(ordered, axis=0)])  # prefix sums of the ordered intensities
-    second = np.vstack([np.zeros((1, m)), np.cumsum(ordered ** 2, axis=0)])  # and of their squares
-    k = count // 2 + 1
-    columns = np.arange(m)
-    best = np.full(m, np.inf)
-    start = np.zeros(m, np.int64)
-    for s in range(n):
-        end = np.minimum(s + k, n)
-        total = first[end, columns] - first[s, columns]
-        variance = (second[end, columns] - second[s, columns] - total ** 2 / k) / np.maximum(k - 1, 1)
-        better = (s + k <= count) & (variance < best)
-        best = np.where(better, variance, best)
-        start = np.where(better, s, start)
-    ok = (count >= 3) & (best < variance_threshold)
-    last = np.minimum(start + k - 1, n - 1)
-    lower = order[np.minimum(start + (k - 1) // 2, n - 1), columns]
-    upper = order[np.minimum(start + k // 2, n - 1), columns]
-    median = _middle(colours, lower, upper)
-    rank = np.argsort(order, axis=0)  # each sample's place in intensity order
-    member = valid & (rank >= start) & (rank <= last) & ok
-    return ok, median, member
+    ok = np.zeros(m, np.bool_)
+    lower = np.zeros(m, np.int64)
+    upper = np.zeros(m, np.int64)
+    member = np.zeros((n, m), np.bool_)
+    order = np.empty(n, np.int64)
+    keys = np.empty(n, values.dtype)
+    first = np.zeros(n + 1)
+    second = np.zeros(n + 1)
+    for j in range(m):
+        count = 0
+        for i in range(n):  # insertion sort: stable, NaN after every number, as np.argsort(kind="stable")
+            key = values[i, j] if valid[i, j] else np.inf
+            count += valid[i, j]
+            p = i
+            while p > 0 and (key < keys[p - 1] or (keys[p - 1] != keys[p - 1] and key == key)):
+                keys[p], order[p] = keys[p - 1], order[p - 1]
+                p -= 1
+            keys[p], order[p] = key, i
+        for i in range(n):
+            v = np.float64(values[order[i], j]) if i < count else 0.0
+            first[i + 1] = first[i] + v if i > 0 else v
+            second[i + 1] = second[i] + v * v if i > 0 else v * v
+        k = count // 2 + 1
+        best, start = np.inf, 0
+        for s in range(n):
+            end = min(s + k, n)
+            total = first[end] - first[s]
+            variance = (second[end] - second[s] - total * total / k) / max(k - 1, 1)
+            if s + k <= count and variance < best:
+                best, start = variance, s
+        ok[j] = count >= 3 and best < variance_threshold
+        lower[j] = order[min(start + (k - 1) // 2, n - 1)]
+        upper[j] = order[min(start + k // 2, n - 1)]
+        if ok[j]:
+            for p in range(start, min(start + k - 1, n - 1) + 1):
+                member[order[p], j] = valid[order[p], j]
+    return ok, lower, upper, member

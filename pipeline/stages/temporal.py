@@ -82,8 +82,9 @@ def smooth(frame: np.ndarray, synthesized: np.ndarray, neighbours: Sequence[Comp
     if not neighbours or not synthesized.any():
         return TemporalResult(frame, share, ())
     height, width = synthesized.shape
-    ys, xs = np.nonzero(synthesized)
-    own = frame[ys, xs].astype(np.float32)
+    flat = np.flatnonzero(synthesized)  # the synthesized pixels in row-major order, as np.nonzero gives them
+    ys, xs = np.divmod(flat, width)
+    own = frame.reshape(-1, 3)[flat].astype(np.float32)
     total = own.copy()
     weight = np.ones(len(ys), np.float32)
     points = np.stack([xs, ys, np.ones_like(xs)]).astype(np.float64)
@@ -103,6 +104,6 @@ def smooth(frame: np.ndarray, synthesized: np.ndarray, neighbours: Sequence[Comp
         total += sample * w[:, None]
         weight += w
     out = frame.copy()
-    out[ys, xs] = np.clip(total / weight[:, None] + 0.5, 0, 255).astype(np.uint8)
-    share[ys, xs] = 1.0 - 1.0 / weight
+    out.reshape(-1, 3)[flat] = np.clip(total / weight[:, None] + 0.5, 0, 255).astype(np.uint8)
+    share.reshape(-1)[flat] = 1.0 - 1.0 / weight
     return TemporalResult(out, share, tuple(n.offset for n in neighbours))
