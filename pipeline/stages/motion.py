@@ -61,29 +61,35 @@ class IgnoreRegion:
 
 @dataclass(frozen=True)
 class MotionConfig:
-    model: MotionModel = "affine"
-    refine: Refinement = "none"
-    max_side: int = 960  # estimation runs on frames downscaled to this longest side
-    max_corners: int = 300  # 600 cost more CPU for no steadier output, 200 shook more (docs/decisions.md D18)
+    """Pass 1's settings. "Working px" are pixels of the frame downscaled to ``max_side`` (full resolution for
+    frames no larger), where corners are found, tracked and fitted; "full px" are the input's."""
+
+    model: MotionModel = "affine"  # the inter-frame transform fitted: affine, similarity or homography
+    refine: Refinement = "none"  # "ecc": the feature estimate refined by direct alignment (_refine_ecc)
+    max_side: int = 960  # full px: frames are downscaled to this longest side for estimation (never enlarged)
+    max_corners: int = 300  # corners per frame, over the whole grid (600 cost more CPU for no steadier output,
+    # 200 shook more: docs/decisions.md D18)
+    # Shi-Tomasi quality: a cell keeps corners whose response reaches ten times this fraction of its best one's
     corner_quality: float = 0.003
-    corner_min_distance: int = 8
-    corner_grid: tuple[int, int] = (8, 5)  # corners are detected per cell (columns, rows), see _detect_corners
-    lk_window: int = 15
-    lk_levels: int = 3
-    lk_passes: int = 2  # later passes track against curr warped back by the estimate so far (removes LK's bias)
-    fb_max_error_px: float = 1.0  # forward-backward tracking error beyond which a track is dropped
-    ransac_threshold_px: float = 1.5
-    min_inliers: int = 12
-    min_inlier_ratio: float = 0.25
-    max_rotation_deg: float = 25.0  # larger inter-frame changes are not hand shake: treated as failures
-    max_scale_change: float = 0.25
-    max_shift_fraction: float = 0.35  # of the frame diagonal
-    cut_hist_distance: float = 0.45  # Bhattacharyya distance of HSV histograms that marks a scene cut
-    hist_step: int = 4  # ... histograms of every hist_step-th pixel in each direction (a colour distribution)
-    ecc_levels: int = 3
-    ecc_iterations: int = 50
-    ecc_epsilon: float = 1e-5
-    ignore: tuple[IgnoreRegion, ...] = ()  # boxes whose features are not used (--ignore)
+    corner_min_distance: int = 8  # working px between two corners
+    corner_grid: tuple[int, int] = (8, 5)  # cells (columns, rows), each with its share of max_corners (_detect_corners)
+    lk_window: int = 15  # working px: the Lucas-Kanade window's side
+    lk_levels: int = 3  # pyramid levels above the working size for the first tracking pass
+    lk_passes: int = 2  # tracking passes; later ones track against curr warped back by the estimate so far
+    # (removes LK's bias)
+    fb_max_error_px: float = 1.0  # working px: forward-backward tracking error beyond which a track is dropped
+    ransac_threshold_px: float = 1.5  # working px: RANSAC's inlier distance (half of it in the refining passes)
+    min_inliers: int = 12  # tracks: fewer inliers and the pair falls back to the identity
+    min_inlier_ratio: float = 0.25  # fraction of the tracked corners the inliers must reach, or the pair falls back
+    max_rotation_deg: float = 25.0  # degrees between two frames: larger is not hand shake, treated as a failure
+    max_scale_change: float = 0.25  # fraction: a larger zoom change between two frames is treated as a failure
+    max_shift_fraction: float = 0.35  # fraction of the frame's diagonal: a larger shift is treated as a failure
+    cut_hist_distance: float = 0.45  # Bhattacharyya distance (0..1) of HSV histograms that marks a scene cut
+    hist_step: int = 4  # working px: the histograms take every hist_step-th pixel in each direction
+    ecc_levels: int = 3  # refine "ecc": pyramid levels, halving the size each
+    ecc_iterations: int = 50  # refine "ecc": iterations per level at most
+    ecc_epsilon: float = 1e-5  # refine "ecc": change of the correlation coefficient (0..1) at which a level stops
+    ignore: tuple[IgnoreRegion, ...] = ()  # boxes (full px, seconds) whose features are not used (--ignore)
     ignore_mask: str | None = None  # image or video, white = ignore (--ignore-mask); pipeline.stabilize reads it
 
     def __post_init__(self) -> None:
