@@ -443,6 +443,12 @@ def _evaluate(devtools: DevTools, expression: str):
     return devtools.call("Runtime.evaluate", expression=expression, returnByValue=True)["result"].get("value")
 
 
+def _ctrl_c_as_at_a_terminal() -> None:
+    """A child's SIGINT as a terminal's Ctrl-C delivers it: a run started in the background (CI) ignores SIGINT, and
+    its children would inherit that, so Python would never raise KeyboardInterrupt in them."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.real_video
 def test_the_debugger_page_shows_a_new_variant_after_apply(tmp_path):
     """`ffviz debug CLIP`: the page opens on frame 0's default render; moving to frame 150, changing a setting and
@@ -464,7 +470,8 @@ def test_the_debugger_page_shows_a_new_variant_after_apply(tmp_path):
     port, rrd = free_port(), tmp_path / "debug.rrd"
     debug = subprocess.Popen([sys.executable, "-m", "ffviz.cli", "debug", str(clip), "--port", str(port), "--rrd",
                               str(rrd)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                             env=dict(os.environ, RERUN_ANALYTICS="0"), start_new_session=True)
+                             env=dict(os.environ, RERUN_ANALYTICS="0"), start_new_session=True,
+                             preexec_fn=_ctrl_c_as_at_a_terminal)
     chrome = devtools = None
     try:
         url = re.search(r"http://\S+", debug.stdout.readline()).group(0)
@@ -489,7 +496,11 @@ def test_the_debugger_page_shows_a_new_variant_after_apply(tmp_path):
             stop(chrome)
         if debug.poll() is None:
             os.killpg(debug.pid, signal.SIGINT)
-            debug.wait(timeout=60)
+            try:
+                debug.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                os.killpg(debug.pid, signal.SIGKILL)
+                raise
     recording = Recording.load(rrd)
     assert recording.indices(variant_entity("default", ent.OUTPUT_FRAME)) == [0, 150]  # the default beside it
     assert recording.indices(variant_entity("alpha=4", ent.OUTPUT_FRAME)) == [150]
