@@ -118,8 +118,14 @@ def write_section(name: str, body: str, report: Path, header: str = "") -> Path:
     return report
 
 
-def publish(name: str, lines: list[str], report: Path | None, header: str = "") -> None:
-    """Write ``lines`` as section ``name`` of ``report`` (None: write nothing) and print them."""
+def save(name: str, lines: list[str], report: Path | None, header: str = "") -> None:
+    """Write ``lines`` as section ``name`` of ``report`` and say so (None: write nothing), for scripts that printed
+    their rows as they were measured."""
     if report is not None:
         print(f"wrote {write_section(name, chr(10).join(lines), report, header)}")
+
+
+def publish(name: str, lines: list[str], report: Path | None, header: str = "") -> None:
+    """Write ``lines`` as section ``name`` of ``report`` (None: write nothing) and print them."""
+    save(name, lines, report, header)
     print("\n".join(lines))

@@ -79,9 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     for clip in args.clips:
         lines.append(run(clip, args.work))
         print(lines[-1], flush=True)
-    report = common.report_path(args)
-    if report is not None:
-        print(f"wrote {common.write_section('live_view_memory', chr(10).join(lines), report, common.RECORDING_HEADER)}")
+    common.save("live_view_memory", lines, common.report_path(args), common.RECORDING_HEADER)
     return 0
 
 

@@ -121,9 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(line)
         print(line, flush=True)
     lines += ["", "Every bound met." if all_met else "Some bound NOT met (rows marked)."]
-    report = common.report_path(args)
-    if report is not None:
-        print(f"wrote {common.write_section('recording_cost', chr(10).join(lines), report, common.RECORDING_HEADER)}")
+    common.save("recording_cost", lines, common.report_path(args), common.RECORDING_HEADER)
     return 0 if all_met else 1
 
 

@@ -84,9 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = measure(clip, args.frames)
         lines += rows
         print("\n".join(rows), flush=True)
-    report = common.report_path(args)
-    if report is not None:
-        print(f"wrote {common.write_section('debugger_speed', chr(10).join(lines), report, HEADER)}")
+    common.save("debugger_speed", lines, common.report_path(args), HEADER)
     return 0
 
 
