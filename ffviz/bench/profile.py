@@ -4,8 +4,8 @@ Each clip and mode runs in this process on one worker (every stage on the callin
 OpenCV's own threads off, under cProfile timed by this thread's CPU clock. A stage's CPU is the cumulative time
 of the functions that make it up (both passes); the chain's own per-stage CPU (FrameResult.cpu_seconds) gives warp,
 completion and deblurring. The encoder's threads are the process's CPU beyond this thread's, added to encode.
-Recording is a second run with a full recording (.rrd): its extra CPU over the first, and by entity family what the
-recorder counted (its digests on the rendering thread, its own thread's encoding and logging); the rest of the extra
+Recording is a second run with a full recording (.rrd): its extra CPU over a third, plain and unprofiled (at least
+what the recorder counted), and by entity family what the recorder counted (its digests on the rendering thread, its own thread's encoding and logging); the rest of the extra
 is the SDK's threads (batching, compression, writing) and what the run does differently. A short synthetic run comes
 first, so that imports and numba's compilation stay out of the figures.
 """
@@ -104,8 +104,9 @@ def _cumulative(stats: pstats.Stats, functions: tuple) -> float:
     return sum(entry[3] for key, entry in stats.stats.items() if key in keys)  # entry[3]: cumulative time
 
 
-def _run(clip: Path, mode: str, workdir: Path, record: bool, codec: str):
-    """(profile of this thread, stage times, process CPU s, this thread's CPU s, the recorder or None). A recorded
+def _run(clip: Path, mode: str, workdir: Path, record: bool | None, codec: str):
+    """(profile of this thread, stage times, process CPU s, this thread's CPU s, the recorder or None). ``record``:
+    True records, False profiles, None does neither (the plain run the recorded one is compared with). A recorded
     run is not profiled: its digests run on this thread, and the profiler's cost would count as the recording's."""
     from pipeline.config import StabilizeConfig
     from pipeline.runtime.encoding import Encoding
@@ -120,7 +121,7 @@ def _run(clip: Path, mode: str, workdir: Path, record: bool, codec: str):
         recorder = RerunRecorder(workdir / f"{mode}.rrd", level="full", jpeg_quality=80)
     times = _StageTimes()
     profile = cProfile.Profile(time.thread_time)
-    run = stabilize if record else functools.partial(profile.runcall, stabilize)
+    run = functools.partial(profile.runcall, stabilize) if record is False else stabilize
     threads_before = cv2.getNumThreads()
     cv2.setNumThreads(0)  # OpenCV's work on the calling thread, where it is attributed
     cpu_before, thread_before = _process_cpu(), time.thread_time()
@@ -130,7 +131,7 @@ def _run(clip: Path, mode: str, workdir: Path, record: bool, codec: str):
     finally:
         cv2.setNumThreads(threads_before)
     process_cpu, thread_cpu = _process_cpu() - cpu_before, time.thread_time() - thread_before
-    return None if record else pstats.Stats(profile), times, process_cpu, thread_cpu, recorder
+    return pstats.Stats(profile) if record is False else None, times, process_cpu, thread_cpu, recorder
 
 
 def _warm_up(mode: str, workdir: Path, codec: str) -> None:
@@ -149,6 +150,9 @@ def profile_stages(clip: Path, mode: str, *, recording: bool = True, codec: str 
         _warm_up(mode, Path(tmp), codec)
         stats, times, process_cpu, thread_cpu, _ = _run(clip, mode, Path(tmp), False, codec)
         recorded = _run(clip, mode, Path(tmp), True, codec) if recording else None
+        # The recording's cost is the recorded run's CPU beyond a plain run's measured the same way, unprofiled:
+        # the profiler's own cost in the run above can exceed what a short clip's recording costs.
+        plain_cpu = _run(clip, mode, Path(tmp), None, codec)[2] if recording else process_cpu
     recorded_cpu = recorded[2] if recorded is not None else process_cpu
     frames = max(times.frames, 1)
     seconds = {stage: _cumulative(stats, functions) for stage, functions in _functions().items()}
@@ -157,7 +161,8 @@ def profile_stages(clip: Path, mode: str, *, recording: bool = True, codec: str 
     seconds["deblur"] = times.cpu.get("deblur", 0.0)
     completion = times.cpu.get("completion", 0.0)
     seconds["local warp"] = max(completion - seconds["mosaic"] - seconds["flow"] - seconds["FMM"], 0.0)
-    seconds["recording"] = max(recorded_cpu - process_cpu, 0.0) if recording else 0.0
+    counted = sum(recorded[4].cpu_by_family.values()) if recorded is not None else 0.0
+    seconds["recording"] = max(recorded_cpu - plain_cpu, counted) if recording else 0.0
     seconds["other"] = max(process_cpu - sum(v for k, v in seconds.items() if k != "recording"), 0.0)
     families = recorded[4].cpu_by_family if recorded is not None else {}
     return StageProfile(clip.name, mode, times.frames,
