@@ -82,10 +82,14 @@ def clip_shape(clip: Path) -> tuple[int, int, int]:
         return video.codec_context.width, video.codec_context.height, frames
 
 
-def measure(clip: Path, work: Path, repeat: int, record_size: str) -> dict[str, list]:
-    """Plain and recorded runs in turn: {'plain': [ChildRun...], 'rrd': [...]}, and the recording's bytes."""
+def measure(clip: Path, work: Path, repeat: int, record_size: str, *, warmup: bool = False) -> dict[str, list]:
+    """Plain and recorded runs in turn: {'plain': [ChildRun...], 'rrd': [...]}, and the recording's bytes.
+    ``warmup``: one pair first, not counted (a fresh checkout's first run compiles and caches numba's kernels: a
+    12-frame clip's first plain run took 7 s of CPU, the next 1.6 s)."""
     runs: dict[str, list] = {"plain": [], "rrd": [], "rrd_bytes": []}
     rrd = work / f"{clip.stem}.rrd"
+    if warmup:
+        measure(clip, work, 1, record_size)
     for _ in range(repeat):
         for kind in ("plain", "rrd"):
             command = ffviz_command(clip, work / f"{clip.stem}.{kind}.mp4", "full")
@@ -128,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="also this video, measured as it is (repeatable)")
     parser.add_argument("--long", action="store_true", help="also 1000 frames of 1920x1080")
     common.add_repeat(parser, 1)
+    parser.add_argument("--no-warmup", dest="warmup", action="store_false",
+                        help="no uncounted first pair (on the first input) to fill numba's and the OS's caches")
     parser.add_argument("--long-repeat", type=int, default=None, metavar="N",
                         help="runs of the --long input (default: --repeat)")
     parser.add_argument("--record-size", default="960", help="the recordings' --record-size (default: %(default)s)")
@@ -145,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
              + (f"{args.clip.name} cropped and scaled to {', '.join(made)}" if made else "")
              + ("; " if made and args.input else "") + ", ".join(path.name for path in args.input)
              + f"; recorded at `--record-size {args.record_size}`; plain and recorded runs in turn, `runs` times each: "
-             "CPU and peak are medians, the CPU ratio the median (and range) of the pairs' ratios.", "",
+             "CPU and peak are medians, the CPU ratio the median (and range) of the pairs' ratios"
+             + (" (after one uncounted pair on the first input)." if args.warmup else "."), "",
              "| input | frames | runs | plain CPU s | --rrd CPU s | CPU ratio (bound 1.30) | plain peak MB | --rrd peak MB | "
              "peak added MB | .rrd MB | bounds |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
@@ -159,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
             name = source
         width, height, frames = clip_shape(clip)
         name = name if name == f"{width}x{height}" else f"{name} ({width}x{height})"
-        line, met = row(name, frames, width * height, measure(clip, args.work, repeat, args.record_size))
+        runs = measure(clip, args.work, repeat, args.record_size, warmup=source == inputs[0][0] and args.warmup)
+        line, met = row(name, frames, width * height, runs)
         all_met &= met
         lines.append(line)
         print(line, flush=True)
