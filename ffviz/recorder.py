@@ -102,10 +102,19 @@ class RerunRecorder:
         self._backlog = Backlog(backlog_bytes) if threaded else None
         self.flush_bytes = FLUSH_BYTES
         self._unflushed = 0  # bytes logged since the SDK was last flushed
+        self._frames_planned: int | None = None  # the frames the path plan has (on_path)
+        self._frames_handed = 0  # frames handed to on_frame so far
+        self._video_done = False  # every frame handed over and the run past its frame loop: the video was written
+        self.failed = False  # the recording could not be written (its OutputError raised)
 
     @property
     def lossless(self) -> bool:
         return self.jpeg_quality is None
+
+    @property
+    def started(self) -> bool:
+        """The run has started (on_start): anything it failed on after that loses the recording too."""
+        return self._info is not None
 
     @property
     def view(self) -> ViewSize:
@@ -121,7 +130,9 @@ class RerunRecorder:
         try:
             self._backlog.put(nbytes, self._timed, work, *args)
         except Exception as error:  # noqa: BLE001 - the writer's failure, said in one line
-            raise self._failure(error, during_run=True) from error
+            # The writer's thread may fail while the run is already past its last frame (the backlog still held
+            # frames): the error surfaces at on_warning or on_finish, after the video was written.
+            raise self._failure(error, during_run=not self._video_done) from error
 
     def _timed(self, work, *args) -> None:
         started = time.perf_counter()
@@ -130,6 +141,7 @@ class RerunRecorder:
 
     def _failure(self, error: BaseException, *, during_run: bool) -> OutputError:
         """The one-line error of a recording that could not be written (the temporary file is removed)."""
+        self.failed = True
         self._abort_stream()
         reason = error.strerror if isinstance(error, OSError) and error.strerror else f"{type(error).__name__}: {error}"
         video = "the video was not written either" if during_run else "the video was written"
@@ -159,6 +171,7 @@ class RerunRecorder:
         self._submit(0, self._on_motion, stamp, estimate)
 
     def on_path(self, plan: PathPlan) -> None:
+        self._frames_planned = len(plan.orig_from_out)
         self._choose_traced(plan.smoothing)  # here: the rendering threads' digests need them
         self._submit(0, self._on_path, plan)
 
@@ -173,11 +186,16 @@ class RerunRecorder:
             view = self.keep(result).digests[self._key]
         digest.finish(view, result, self._spec)
         self._submit(view.nbytes, self._write_frame, view)
+        self._frames_handed += 1
 
     def on_warning(self, stamp: Stamp | None, message: str) -> None:
+        # A warning once every frame was handed over comes after the video was closed (stabilize.run_passes).
+        self._video_done = self._video_done or (self._frames_planned is not None
+                                                and self._frames_handed >= self._frames_planned)
         self._submit(0, self._log_warning, stamp, message)
 
     def on_finish(self, report: Any) -> None:
+        self._video_done = True  # run_passes closes the video before on_finish
         self._submit(0, self._log_meta, report)
         self.close()
 

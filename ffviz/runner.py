@@ -20,7 +20,7 @@ from pipeline import presets
 from pipeline import stabilize as stab
 from pipeline.runtime.encoding import CODEC_OPTIONS, Encoding
 from pipeline.runtime import video_writer
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, OutputError
 from pipeline.runtime.observer import Observer, Observers
 from pipeline.runtime.source import FileSource
 
@@ -185,11 +185,15 @@ def run_stabilize(input_path: Path, output_path: Path, args: argparse.Namespace,
             report = stab.stabilize_source(source, output_path, config, observer=Observers(recorder, *observers),
                                            progress=tqdm_progress, encoding=encoding,
                                            workers=getattr(args, "workers", None))
-    except BaseException:
+    except BaseException as error:
         if recorder is not None:
             recorder.abort()
         if live is not None:
             live.stop()
+        if isinstance(error, OutputError) and recorder is not None and recorder.started and not recorder.failed:
+            # The video could not be written (a full disk) once the run was under way: the recording is dropped
+            # with it; say so.
+            raise OutputError(f"{error}; the recording {rrd_path} was not written either") from error
         raise
     _print_report(report, rrd_path)
     written = [(report.output_path, "stabilized video")]

@@ -8,6 +8,8 @@ import fnmatch
 import os
 import typing
 import subprocess
+import threading
+import time
 from types import SimpleNamespace
 
 import av
@@ -831,6 +833,50 @@ def test_a_full_disk_under_the_recording_is_one_line_and_leaves_nothing(clip, tm
                        f"{'written' if out.exists() else 'not written either'}")
     assert not any("ERROR" in line or "re_log" in line for line in err)
     assert not rrd.exists() and not list(tmp_path.glob(".full.*"))
+
+
+def test_a_recording_failing_after_the_last_frame_says_the_video_was_written(clip, tmp_path, monkeypatch):
+    """The recorder's thread fails on a frame while the run is already past its last one (the backlog still held
+    frames): the error surfaces at on_finish, after the video was closed, and says it was written."""
+    rrd, out = tmp_path / "late.rrd", tmp_path / "out.mp4"
+    recorder = RerunRecorder(rrd, level="summary")
+    finishing = threading.Event()
+
+    def failing(view):
+        finishing.wait(120)  # the pipeline hands every frame over first
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    on_finish = recorder.on_finish
+
+    def late(report):
+        finishing.set()
+        deadline = time.monotonic() + 120
+        while recorder._backlog.error is None and time.monotonic() < deadline:  # failed before on_finish hands work
+            time.sleep(0.01)
+        on_finish(report)
+
+    monkeypatch.setattr(recorder, "_write_frame", failing)
+    monkeypatch.setattr(recorder, "on_finish", late)
+    with pytest.raises(OutputError, match=r"cannot write the recording .*late.rrd: No space left on device; the video "
+                                          r"was written$"):
+        stabilize(clip, out, StabilizeConfig(mode="none"), observer=recorder)
+    recorder.abort()
+    assert out.exists() and not rrd.exists() and not list(tmp_path.glob(".late.*"))
+
+
+def test_a_video_that_cannot_be_written_says_the_recording_was_not_written_either(clip, tmp_path, monkeypatch, capfd):
+    from pipeline.runtime import video_writer
+
+    def full(self):
+        raise OutputError(f"cannot finish writing {out}: No space left on device")
+
+    monkeypatch.setattr(video_writer.VideoWriter, "close", full)
+    out, rrd = tmp_path / "out.mp4", tmp_path / "kept.rrd"
+    assert cli.main(["stabilize", str(clip), "-o", str(out), "--mode", "none", "--rrd", str(rrd)]) == 3
+    err = capfd.readouterr().err.strip().splitlines()
+    assert err[-1] == (f"ffviz: error: cannot finish writing {out}: No space left on device; the recording {rrd} was "
+                       "not written either")
+    assert not rrd.exists() and not list(tmp_path.glob(".kept.*"))
 
 
 def _dataclasses_in(hint) -> list[type]:
