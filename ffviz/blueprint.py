@@ -26,6 +26,9 @@ TAB_NOTES = {
     "motion": ("**Motion estimation** (thesis ch. 3): corners tracked from frame t-1 to t (green inliers, red "
                "outliers), a robust fit of `curr_from_prev`; its shift, rotation and zoom per frame, inliers and "
                "the fit's residual. Orange: tracks of another motion (a moving object) the camera did not follow; "
+               "which motion the camera took, and the evidence for it (occlusion: what a figure uncovers or covers "
+               "belongs to a layer behind it; the frames around it: their evidence, carried by where tracks "
+               "continue and how the camera's motion changes), is charted and named per frame; "
                "violet: where `--ignore` / `--ignore-mask` kept features out; cyan (`--rolling-shutter`): how far each "
                "band of rows was seen from the middle row's view (5x), and the bottom band's shift against the top's."),
     "smoothing": ("**Motion smoothing** (eq. 18, `S_t = sum G(i-t) T_t^i`) and **warping** (eq. 19, "
@@ -123,8 +126,13 @@ def motion_tab(rolling_shutter: bool = False, portrait: bool = False) -> rrb.Con
                     rrb.TimeSeriesView(name="inlier ratio", origin=f"/{ent.MOTION_INLIER_RATIO}"),
                     rrb.TimeSeriesView(name="residual (px)", origin=f"/{ent.MOTION_RESIDUAL}"),
                 ),
+                rrb.Horizontal(
+                    rrb.TimeSeriesView(name="camera's motion: evidence for the one taken (log-odds)",
+                                       origin=f"/{ent.MOTION_CAMERA}"),
+                    rrb.TextLogView(name="camera's motion: which, and why", origin=f"/{ent.MOTION_CAMERA_RULE}"),
+                ),
                 *skew_chart,
-                row_shares=[3, 2, 2][:2 + len(skew_chart)],
+                row_shares=[3, 2, 2, 2][:3 + len(skew_chart)],
             ),
             column_shares=[2, 3] if portrait else [1, 1],
         ),

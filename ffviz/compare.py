@@ -37,7 +37,7 @@ from pipeline.runtime.encoding import Encoding
 from pipeline.runtime.video_info import VideoInfo
 from pipeline.runtime import video_reader, video_writer
 from pipeline.runtime.observer import ProgressFactory, null_progress
-from pipeline.stages import motion
+from pipeline.stages import background, motion
 
 # Motion for display: rotation, zoom and shift are what a viewer reads off a path; 480 px is plenty for a plot.
 PATH_MOTION = motion.MotionConfig(model="similarity", max_side=480)
@@ -103,37 +103,44 @@ def _reader(panel: Panel) -> video_reader.VideoReader:
 
 def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progress=None,
                 stop: threading.Event | None = None) -> CameraPath:
-    """Pass 1 for one video: its motion frame to frame (pipeline.stages.motion) accumulated into a path.
+    """Pass 1 for one video: its motion frame to frame (pipeline.stages.motion, the camera's chosen as a run
+    chooses it: pipeline.stages.background) accumulated into a path.
     ``stop``: set from another thread (Ctrl-C in the main one), it ends the pass at the next frame."""
-    rows: list[tuple[float, float, float]] = []
+    layers: list[background.PairLayers] = []
+    statuses: list[str] = []
     times: list[float] = []
-    cuts = 0
-    first_from_t = geometry.IDENTITY.copy()
+    sizes: list[tuple[int, int]] = []
+    evidence = background.LayerEvidence()
     previous: motion.PreparedFrame | None = None
-    previous_estimate: motion.MotionEstimate | None = None
     with _reader(panel) as reader:
         info = reader.info
-        first_time = None
         for frame in reader:
             if stop is not None and stop.is_set():
                 raise _Stopped()
             prepared = motion.prepare(frame.rgb, config)
-            if previous is not None and prepared.gray.shape == previous.gray.shape:
+            if previous is None:
+                estimate = motion.first_frame_estimate()
+            elif prepared.gray.shape != previous.gray.shape:
+                estimate = motion.MotionEstimate(geometry.IDENTITY.copy(), "cut")
+            else:
                 estimate = motion.estimate(previous, prepared, config)
-                estimate = motion.choose_background(estimate, previous_estimate, prepared.width, prepared.height)
-                previous_estimate = estimate
-                cuts += estimate.status == "cut"
-                first_from_t = first_from_t @ np.linalg.inv(estimate.curr_from_prev)
-                first_from_t /= first_from_t[2, 2]
+            layers.extend(pair for _, pair in evidence.push(estimate, previous, prepared))
+            statuses.append(estimate.status)
             previous = prepared
-            first_time = frame.time_s if first_time is None else first_time
+            first_time = frame.time_s if not times else first_time
             times.append(frame.time_s - first_time)
-            rows.append(geometry.decompose(first_from_t, frame.rgb.shape[1], frame.rgb.shape[0])[:3])
+            sizes.append((frame.rgb.shape[1], frame.rgb.shape[0]))
             if progress is not None:
                 progress.update()
-    if not rows:
+    if not statuses:
         raise InputError(f"no decodable video frames in {panel.path}")
-    return CameraPath(info, np.array(times), np.array(rows, np.float64).reshape(-1, 3), cuts)
+    layers.extend(pair for _, pair in evidence.finish())
+    rows, first_from_t = [], geometry.IDENTITY.copy()
+    for pair, choice, (width, height) in zip(layers, background.decide(layers), sizes):
+        first_from_t = first_from_t @ np.linalg.inv(pair.motions[choice.taken])
+        first_from_t /= first_from_t[2, 2]
+        rows.append(geometry.decompose(first_from_t, width, height)[:3])
+    return CameraPath(info, np.array(times), np.array(rows, np.float64).reshape(-1, 3), statuses.count("cut"))
 
 
 class _Stopped(Exception):

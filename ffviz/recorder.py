@@ -277,6 +277,7 @@ class RerunRecorder:
         if self.level == "full" and len(estimate.curr_points):
             self._features(estimate)
         self._on_foreground(estimate)
+        self._on_camera_choice(estimate)
         self._on_ignored(estimate.ignored)
         self.cpu_by_family[ent.MOTION_PARAMS.split("/")[0]] += time.thread_time() - started
 
@@ -291,21 +292,40 @@ class RerunRecorder:
             origins=prev, vectors=curr[::step] - prev, colors=colours[::step]))
 
     def _on_foreground(self, estimate: MotionEstimate) -> None:
-        """The other motion's tracks (a moving object's, or the RANSAC winner's when that was the object), orange
-        over the green and red ones (full level), and a log line where the camera took the other motion."""
-        if estimate.chose_alternative:
-            self._log_line(rr.TextLog("the tracks most agree on move with a foreground object: the camera "
-                                      "follows the other motion (orange: the object's)", level=rr.TextLogLevel.INFO))
+        """The other motions' tracks (moving figures', or RANSAC's winner's when that was a figure), orange over the
+        green and red ones (full level), and a log line where the camera took another motion than RANSAC's."""
+        if estimate.chose_other:
+            self._log_line(rr.TextLog("the tracks most agree on move with a foreground figure: the camera "
+                                      "follows another motion (orange: the figures')", level=rr.TextLogLevel.INFO))
         if self.level != "full":
             return
-        points = estimate.alternative_curr_points
-        if points is not None and len(points):
-            self.rec.log(ent.MOTION_FOREGROUND, rr.Points2D(self.view.points(points), colors=legends.FOREGROUND_COLOUR,
-                                                            radii=2.5))
+        points = [other.curr_points for other in estimate.others if len(other.curr_points)]
+        if points:
+            self.rec.log(ent.MOTION_FOREGROUND, rr.Points2D(self.view.points(np.concatenate(points)),
+                                                            colors=legends.FOREGROUND_COLOUR, radii=2.5))
             self._foreground_shown = True
         elif self._foreground_shown:
             self.rec.log(ent.MOTION_FOREGROUND, rr.Clear(recursive=False))
             self._foreground_shown = False
+
+    def _on_camera_choice(self, estimate: MotionEstimate) -> None:
+        """Which motion the camera took and why (pipeline/stages/background.py): the evidence for it against the best
+        other motion in log-odds, charted, and a line naming the motion and what weighed most."""
+        choice = estimate.camera
+        if choice is None:
+            return
+        for name in ent.MOTION_CAMERA_EVIDENCE:
+            self.rec.log(f"{ent.MOTION_CAMERA}/{name}", rr.Scalars(getattr(choice, name)))
+        if choice.rule == "one motion":
+            line = "one motion found: the camera's"
+        else:
+            count = len(choice.behind)
+            taken = f"motion {choice.taken + 1} of {count} ({'RANSAC' if choice.taken == 0 else 'another'}'s; " \
+                    "orange: the others')"
+            votes = ", ".join(f"{b} behind/{f} in front" for b, f in zip(choice.behind, choice.in_front))
+            line = (f"camera: {taken}; decided by {choice.rule} (log-odds for it: occlusion {choice.occlusion:+.1f}, "
+                    f"the frames around it {choice.linked:+.1f}; occlusion px of each motion: {votes})")
+        self.rec.log(ent.MOTION_CAMERA_RULE, rr.TextLog(line))
 
     def _on_ignored(self, ignored: np.ndarray | None) -> None:
         """Outline of where features were not used (--ignore boxes, --ignore-mask), logged when it changes."""

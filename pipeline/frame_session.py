@@ -28,7 +28,7 @@ from pipeline.runtime.observer import NullObserver, ProgressFactory, null_progre
 from pipeline.runtime.source import FileSource, WindowSource
 from pipeline.stabilize import estimate_motion
 
-CACHE_VERSION = 1  # bump when MotionPass's meaning changes
+CACHE_VERSION = 2  # bump when MotionPass's meaning changes
 
 
 class FrameSession:

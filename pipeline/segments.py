@@ -1,9 +1,11 @@
 """Segment-parallel stabilization of one video, with frames identical to the whole-video run.
 
 A video is cut into segments of consecutive frames. Pass 1 estimates the motion of each segment
-independently: the segment owning frame a also reads frame a - 1, so the pair (a - 1, a) is estimated
-exactly as in one run (each estimate depends on its pair alone: RANSAC is reseeded per estimate, cut
-detection compares the pair's histograms). The path is smoothed as a whole (it is tiny). Pass 2 renders
+independently: the segment owning frames a..b-1 also reads frames a - 2, a - 1 and b, so each of its pairs is
+estimated exactly as in one run (each estimate depends on its pair alone: RANSAC is reseeded per estimate, cut
+detection compares the pair's histograms) and gets the evidence one run gives it for choosing the camera's motion
+(stages/background.py: the links to the pair before, the occlusion test at both its frames); the choice itself is
+made over the joined clip. The path is smoothed as a whole (it is tiny). Pass 2 renders
 each segment while reading ``radius`` frames either side of it (the completion/deblur window), so every
 frame sees the neighbours it sees in one run. The frames come back in order and are written once, with
 the audio, by the caller's process.
@@ -28,6 +30,7 @@ from pipeline.runtime.encoding import Encoding
 from pipeline.runtime import video_reader, video_writer
 from pipeline.runtime.observer import NullObserver, Observer, null_progress
 from pipeline.runtime.source import FileSource
+from pipeline.stages import background
 
 Mapper = Callable[[Callable[..., Any], Sequence[tuple]], Iterable[Any]]
 OPEN_END = sys.maxsize  # the last segment reads to the end, whatever the header's frame count said
@@ -59,9 +62,14 @@ def motion_segment(path: Path, config: stab.StabilizeConfig, frames: range) -> M
 
 
 def join_motion(parts: Iterable[MotionPass]) -> MotionPass:
+    """The segments' passes as one, each pair's camera motion chosen over the whole clip from their evidence, as a
+    whole-video run chooses it (background.decide)."""
     parts = [p for p in parts if p.statuses]
-    tracks = None if any(p.tracks is None for p in parts) else [pair for p in parts for pair in p.tracks]
-    return MotionPass(np.concatenate([p.curr_from_prev for p in parts]),
+    layers = [pair for p in parts for pair in p.layers]
+    choices = background.decide(layers)
+    tracks = None if any(p.tracks is None for p in parts) else \
+        [options[choice.taken] for options, choice in zip((pair for p in parts for pair in p.tracks), choices)]
+    return MotionPass(np.array([pair.motions[choice.taken] for pair, choice in zip(layers, choices)]),
                       [s for p in parts for s in p.statuses], [t for p in parts for t in p.times_s],
                       [w for p in parts for w in p.warnings], tracks)
 

@@ -7,6 +7,7 @@ window, not by the video's length: pass 1 keeps the previous downscaled frame an
 
 from __future__ import annotations
 
+import collections
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ from pipeline.runtime import parallel, video_reader, video_writer
 from pipeline.runtime.observer import NullObserver, Observer, ProgressFactory, is_null, null_progress
 from pipeline.runtime.source import FileSource, FrameSource, PrefetchedSource, one_pass
 from pipeline.stages.adaptive_crop import AdaptiveCrop
-from pipeline.stages import motion, rolling_shutter, warping
+from pipeline.stages import background, motion, rolling_shutter, warping
 
 __all__ = ["DEFAULT_CROP_FILL", "DEFAULT_PATH", "DEFAULT_RADIUS", "HARD_CROP_RADIUS", "OUTPUT_MODES", "default_path",
            "default_radius", "OutputMode", "StabilizeConfig", "MotionPass", "PathPlan", "FrameResult",
@@ -55,36 +56,19 @@ class StabilizeReport:
 def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observer: Observer,
                     progress: ProgressFactory, total: int | None, frames: range | None = None,
                     workers: int = 1, keep_tracks: bool = False) -> MotionPass:
-    """``frames``: estimate only these (a segment); the pair (start - 1, start) is estimated here, so each
-    segment reads one frame before its range and every pair gets the estimate a whole-video run gives it.
-    ``workers``: pairs estimated at once (threads); results are taken in frame order, the same either way.
-    ``keep_tracks``: keep each pair's inlier tracks (rolling-shutter correction fits them after the pass)."""
-    transforms: list[np.ndarray] = []
-    tracks: list[rolling_shutter.Tracks | None] = []
-    statuses: list[str] = []
-    times: list[float] = []
-    warnings: list[tuple[int | None, str]] = []
+    """Pass 1: every pair's motion, the camera's chosen where a pair holds two (pipeline/stages/background.py; each
+    estimate reaches ``observer`` once chosen, up to 2 x background.LAG_PAIRS pairs later).
+
+    ``frames``: estimate only these (a segment). The pairs (start - 2, start - 1) and (stop - 1, stop) are
+    estimated too, so that every pair of the range gets the estimate and the evidence a whole-video run gives it;
+    the choice is left to ``pipeline.segments.join_motion``, which makes it over the joined clip (the returned
+    transforms are RANSAC's winners until then). ``workers``: pairs estimated at once (threads); results are taken
+    in frame order, the same either way. ``keep_tracks``: keep each pair's inlier tracks (rolling-shutter
+    correction fits them after the pass)."""
+    collected = _PassOne(observer, keep_tracks, frames)
     bar = progress("pass 1/2: motion", total)
-    frames_range = frames
-
     ignore = _IgnoreMasks(config, source.info.width, source.info.height)
-
-    def pairs(decoded: Iterable[Frame]) -> Iterator[_MotionPair]:
-        """Each frame with its predecessor, prepared (downscaled, histogram) on this thread."""
-        previous: motion.PreparedFrame | None = None
-        for frame in decoded:
-            mask = ignore.at(frame)
-            if frames_range is not None and frame.index >= frames_range.stop:
-                source.drain_warnings()  # the next segment's
-                return
-            if frames_range is not None and frame.index < frames_range.start:
-                source.drain_warnings()  # an earlier segment's
-                if frame.index == frames_range.start - 1:
-                    previous = motion.prepare(frame.rgb, config, mask)
-                continue
-            prepared = motion.prepare(frame.rgb, config, mask)
-            yield _MotionPair(frame, previous, prepared, source.drain_warnings())
-            previous = prepared
+    evidence = background.LayerEvidence()
 
     def estimate_pair(pair: _MotionPair) -> tuple[_MotionPair, motion.MotionEstimate]:
         if pair.previous is None:
@@ -93,34 +77,104 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
             return pair, motion.MotionEstimate(np.eye(3), "cut", warning="frame size changed: treated as a cut")
         return pair, motion.estimate(pair.previous, pair.prepared, config)
 
-    previous: motion.MotionEstimate | None = None  # the pair before, for motion.choose_background
     try:
         with one_pass(source) as decoded:
-            for pair, estimate in parallel.ordered_map(estimate_pair, pairs(decoded), workers):
-                frame = pair.frame
-                stamp = Stamp(frame.index, frame.time_s)
-                estimate = motion.choose_background(estimate, previous, pair.prepared.width, pair.prepared.height)
-                previous = estimate
-                for message in pair.decoder_warnings:  # decoder complaints (corrupt packets skipped)
-                    warnings.append((frame.index, message))
-                    observer.on_warning(stamp, message)
-                if estimate.warning:
-                    warnings.append((frame.index, estimate.warning))
-                    observer.on_warning(stamp, estimate.warning)
-                observer.on_motion(stamp, estimate)
-                transforms.append(estimate.curr_from_prev)
-                if keep_tracks:
-                    tracks.append(rolling_shutter.inlier_tracks(estimate))
-                statuses.append(estimate.status)
-                times.append(frame.time_s)
-                bar.update()
-        _forward_warnings(source, None, observer, warnings)
+            pairs = _motion_pairs(decoded, source, config, ignore, frames)
+            for pair, estimate in parallel.ordered_map(estimate_pair, pairs, workers):
+                if frames is None or pair.frame.index in frames:
+                    bar.update()
+                collected.waiting.append(_Waiting(pair.frame.index, pair.frame.time_s, pair.decoder_warnings))
+                for raw, layers in evidence.push(estimate, pair.previous, pair.prepared):
+                    collected.add(raw, layers)
+            for raw, layers in evidence.finish():
+                collected.add(raw, layers)
+            collected.finish()
+        _forward_warnings(source, None, observer, collected.warnings)
     finally:
         bar.close()
         ignore.close()
-    if not transforms:
+    if not collected.transforms:
         raise InputError(f"{source.info.path}: no decodable video frames")
-    return MotionPass(np.array(transforms), statuses, times, warnings, tracks if keep_tracks else None)
+    return collected.motion_pass()
+
+
+def _motion_pairs(decoded: Iterable[Frame], source: FrameSource, config: motion.MotionConfig,
+                  ignore: _IgnoreMasks, frames: range | None) -> Iterator[_MotionPair]:
+    """Each frame with its predecessor, prepared (downscaled, histogram) on this thread; for a segment, from the
+    pair before its range to the pair after it (``estimate_motion``)."""
+    first = None if frames is None else max(frames.start - 1, 0)
+    previous: motion.PreparedFrame | None = None
+    for frame in decoded:
+        mask = ignore.at(frame)
+        if frames is not None and frame.index > frames.stop:
+            source.drain_warnings()  # the next segment's
+            return
+        if first is not None and frame.index < first:
+            source.drain_warnings()  # an earlier segment's
+            if frame.index == first - 1:
+                previous = motion.prepare(frame.rgb, config, mask)
+            continue
+        prepared = motion.prepare(frame.rgb, config, mask)
+        warnings = source.drain_warnings()
+        yield _MotionPair(frame, previous, prepared, warnings if frames is None or frame.index in frames else [])
+        previous = prepared
+
+
+class _PassOne:
+    """What pass 1 collects, pair by pair in frame order: the raw estimates wait (``waiting``) until the camera
+    chooser has decided them (a whole video), or are kept raw with their evidence (a segment)."""
+
+    def __init__(self, observer: Observer, keep_tracks: bool, frames: range | None) -> None:
+        self.observer, self.keep_tracks, self.frames = observer, keep_tracks, frames
+        self.chooser = background.CameraChooser() if frames is None else None
+        self.waiting: collections.deque[_Waiting] = collections.deque()  # not the frames: 180 at 4K are 4 GB
+        self.raw: collections.deque[motion.MotionEstimate] = collections.deque()
+        self.transforms: list[np.ndarray] = []
+        self.tracks: list = []
+        self.statuses: list[str] = []
+        self.times: list[float] = []
+        self.warnings: list[tuple[int | None, str]] = []
+        self.layers: list[background.PairLayers] = []
+
+    def add(self, raw: motion.MotionEstimate, layers: background.PairLayers) -> None:
+        if self.chooser is None:
+            self._emit(self.waiting.popleft(), raw, layers)
+            return
+        self.raw.append(raw)
+        for _, choice in self.chooser.push(layers):
+            self._emit(self.waiting.popleft(), motion.with_camera(self.raw.popleft(), choice), None)
+
+    def finish(self) -> None:
+        if self.chooser is not None:
+            for _, choice in self.chooser.finish():
+                self._emit(self.waiting.popleft(), motion.with_camera(self.raw.popleft(), choice), None)
+
+    def _emit(self, frame: _Waiting, estimate: motion.MotionEstimate,
+              layers: background.PairLayers | None) -> None:
+        if self.frames is not None and frame.index not in self.frames:
+            return  # a pair another segment owns, estimated for this one's evidence
+        stamp = Stamp(frame.index, frame.time_s)
+        for message in frame.decoder_warnings:  # decoder complaints (corrupt packets skipped)
+            self.warnings.append((frame.index, message))
+            self.observer.on_warning(stamp, message)
+        if estimate.warning:
+            self.warnings.append((frame.index, estimate.warning))
+            self.observer.on_warning(stamp, estimate.warning)
+        self.observer.on_motion(stamp, estimate)
+        self.transforms.append(estimate.curr_from_prev)
+        if self.keep_tracks:
+            self.tracks.append(rolling_shutter.inlier_tracks(estimate) if layers is None else
+                               tuple(rolling_shutter.inlier_tracks(motion.with_camera(estimate, choice))
+                                     for choice in background.every_choice(layers)))
+        self.statuses.append(estimate.status)
+        self.times.append(frame.time_s)
+        if layers is not None:
+            self.layers.append(layers)
+
+    def motion_pass(self) -> MotionPass:
+        return MotionPass(np.array(self.transforms), self.statuses, self.times, self.warnings,
+                          self.tracks if self.keep_tracks else None,
+                          layers=None if self.frames is None else self.layers)
 
 
 class _IgnoreMasks:
@@ -182,6 +236,15 @@ class _MotionPair:
     previous: motion.PreparedFrame | None  # None: the first frame (of the video, or after nothing decodable)
     prepared: motion.PreparedFrame
     decoder_warnings: list[str]  # raised while decoding up to this frame
+
+
+@dataclass(frozen=True)
+class _Waiting:
+    """A pair's frame while its camera motion waits to be chosen: what is said of it then, not its pixels."""
+
+    index: int
+    time_s: float
+    decoder_warnings: list[str]
 
 
 def _forward_warnings(source: FrameSource, stamp: Stamp | None, observer: Observer,

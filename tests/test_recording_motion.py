@@ -48,18 +48,42 @@ def run(tmp_path_factory):
     return Recording.load(rrd), collector
 
 
+def _others(estimate) -> np.ndarray | None:
+    """Every other motion's track ends, as the recorder draws them (None: no other motion)."""
+    points = [other.curr_points for other in estimate.others if len(other.curr_points)]
+    return np.concatenate(points) if points else None
+
+
 def test_foreground_tracks_are_the_other_motions(run):
     recording, collector = run
     logged = rows_at(recording, ent.MOTION_FOREGROUND, "Points2D:positions")
     estimates = {stamp.index: e for stamp, e in collector.results["motion"]}
-    with_other = [t for t, e in estimates.items() if e.alternative_curr_points is not None]
+    with_other = [t for t, e in estimates.items() if _others(e) is not None]
     assert with_other, "the figure gives no second motion: the test shows nothing"
     for t in with_other:
-        assert np.allclose(np.array(logged[t]), estimates[t].alternative_curr_points, atol=1e-3)
+        assert np.allclose(np.array(logged[t]), _others(estimates[t]), atol=1e-3)
     # A frame without another motion after one with: cleared, so stale points do not stay on screen.
     for t in range(1, N_FRAMES):
-        if estimates[t].alternative_curr_points is None and estimates[t - 1].alternative_curr_points is not None:
+        if _others(estimates[t]) is None and _others(estimates[t - 1]) is not None:
             assert logged.get(t, "missing") is None
+
+
+def test_each_pair_says_which_motion_the_camera_took_and_why(run):
+    """The camera's choice at every pair (pipeline/stages/background.py): a line naming the motion taken and the
+    rule that weighed most, and the evidence for it charted, as the estimates say."""
+    recording, collector = run
+    estimates = {stamp.index: e for stamp, e in collector.results["motion"]}
+    lines = {t: text[0] for t, text in rows_at(recording, ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
+    assert sorted(lines) == sorted(estimates)
+    for t, estimate in estimates.items():
+        choice = estimate.camera
+        if choice.rule == "one motion":
+            assert lines[t].startswith("one motion")
+        else:
+            assert f"motion {choice.taken + 1} of {len(estimate.others) + 1}" in lines[t] and choice.rule in lines[t]
+    frames, linked = recording.scalars(f"{ent.MOTION_CAMERA}/linked")
+    assert frames.tolist() == sorted(estimates)
+    assert np.allclose(linked, [estimates[t].camera.linked for t in frames.tolist()])
 
 
 def test_ignore_box_is_outlined_while_active(run):

@@ -58,10 +58,11 @@ def _parts() -> list[tuple[str, tuple]]:
     completion, in nesting order: a later part is not inside an earlier one."""
     from pipeline import chain
     from pipeline.runtime import video_reader, video_writer
-    from pipeline.stages import candidates, completion, fallback, fmm, local_flow, local_warp, motion
+    from pipeline.stages import background, candidates, completion, fallback, fmm, local_flow, local_warp, motion
 
     return [("decode", (video_reader.VideoReader.__iter__,)),
-            ("motion", (motion.prepare, motion.estimate, motion.choose_background)),
+            ("motion", (motion.prepare, motion.estimate, background.LayerEvidence.push,
+                        background.CameraChooser.push, background.CameraChooser.finish)),
             ("path", (chain.plan_path,)),
             ("registration (ECC per neighbour)", (completion.register_neighbours,)),
             ("samples at the missing pixels", (candidates.Evidence.__init__,)),

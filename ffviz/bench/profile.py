@@ -35,10 +35,11 @@ def _functions() -> dict[str, tuple]:
     from pipeline import chain
     from pipeline.runtime.encoding import Encoding
     from pipeline.runtime import video_reader, video_writer
-    from pipeline.stages import completion, fmm, local_flow, mosaic, motion
+    from pipeline.stages import background, completion, fmm, local_flow, mosaic, motion
 
     return {"decode": (video_reader.VideoReader.__iter__,),
-            "motion": (motion.prepare, motion.estimate, motion.choose_background),
+            "motion": (motion.prepare, motion.estimate, background.LayerEvidence.push,
+                        background.CameraChooser.push, background.CameraChooser.finish),
             "smoothing": (chain.plan_path,),
             "mosaic": tuple(f for f in (mosaic.mosaic_from_samples, getattr(completion, "register_neighbours", None))
                             if f is not None),  # with the neighbours' local registration where there is one

@@ -36,11 +36,23 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "prev_points": (f"{ent.MOTION_FEATURES}/arrows",),
         "curr_points": (f"{ent.MOTION_FEATURES}/points", f"{ent.MOTION_FEATURES}/arrows"),
         "inliers": (f"{ent.MOTION_FEATURES}/points",),  # as the points' colours
-        "alternative": NotRecorded("the second motion among the outliers; its effect is curr_from_prev"),
-        "alternative_prev_points": NotRecorded("where the other motion's tracks start; their ends are drawn"),
-        "alternative_curr_points": (ent.MOTION_FOREGROUND,),
-        "chose_alternative": (ent.LOG,),
+        "others": Nested("OtherMotion"),
+        "chose_other": (ent.LOG, ent.MOTION_CAMERA_RULE),
         "ignored": (ent.MOTION_IGNORED,),
+        "camera": Nested("CameraChoice"),
+    },
+    "OtherMotion": {  # a motion the camera did not take (a figure's)
+        "curr_from_prev": NotRecorded("a figure's motion; its effect is which motion the camera took"),
+        "prev_points": NotRecorded("where its tracks start; their ends are drawn"),
+        "curr_points": (ent.MOTION_FOREGROUND,),
+    },
+    "CameraChoice": {  # how the camera's motion was chosen (pipeline/stages/background.py)
+        "taken": (ent.MOTION_CAMERA_RULE,),
+        "rule": (ent.MOTION_CAMERA_RULE,),
+        "occlusion": (f"{ent.MOTION_CAMERA}/occlusion",),
+        "linked": (f"{ent.MOTION_CAMERA}/linked",),
+        "behind": (ent.MOTION_CAMERA_RULE,),
+        "in_front": (ent.MOTION_CAMERA_RULE,),
     },
     "PathPlan": {  # on_path, once
         "motion": Nested("MotionPass"),
@@ -64,6 +76,14 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "statuses": NotRecorded("recorded frame by frame from on_motion"),
         "times_s": (ent.VIDEO_TIME_TIMELINE,),
         "warnings": (ent.LOG,),
+        "layers": Nested("PairLayers"),
+    },
+    "PairLayers": {  # a segment's evidence before the join chooses; what it chose is each pair's CameraChoice
+        "motions": NotRecorded("the camera's is recorded frame by frame from on_motion"),
+        "links": NotRecorded("its effect is CameraChoice.linked"),
+        "changes": NotRecorded("its effect is CameraChoice.linked"),
+        "behind": NotRecorded("recorded as CameraChoice.behind"),
+        "in_front": NotRecorded("recorded as CameraChoice.in_front"),
     },
     "SmoothingResult": {
         "orig_from_stab": NotRecorded("chooses the traced frames; shown as the smoothed trajectory"),

@@ -95,6 +95,8 @@ class SyntheticConfig:
     object_sweep: float = 0.6  # fraction of the frame width its path spans (centred); > 1: enters/leaves through the borders
     person_size: tuple[float, float] = (0.22, 0.6)  # "person": width, height as fractions of the frame's
     person_speed_px: tuple[float, float] = (10.0, 25.0)  # "person": per-frame speed range, frame pixels
+    people: int = 1  # "person": how many figures, each on its own path in its own cut of the photograph; the k-th
+    # (from 0) at 0.8**k of person_size, behind the ones before it
     # Motion blur.
     blurred_frames: tuple[int, ...] | None = None  # None -> default_blurred_frames(n_frames); () -> none
     blur_length_px: float = 12.0  # px: length of the linear motion-blur kernel
@@ -115,6 +117,9 @@ class SyntheticConfig:
             raise ConfigError(f"readout must be a fraction of the frame interval in 0..1, not {self.readout}")
         if self.object_kind not in ("disc", "person"):
             raise ConfigError(f"object_kind must be 'disc' or 'person', not {self.object_kind!r}")
+        if int(self.people) < 1 or (self.people > 1 and self.object_kind != "person"):
+            raise ConfigError(f"people must be at least 1, and above 1 only for object_kind 'person', not "
+                              f"{self.people}")
         for i in self.blurred_frames or ():
             if not 0 <= int(i) < n:
                 raise ConfigError(f"blurred frame index {i} outside 0..{n - 1}")
@@ -140,6 +145,8 @@ class SyntheticVideo:
     object_world_from_patch: np.ndarray | None = None  # (N, 3, 3) pose of the object patch in the world
     object_patch: np.ndarray | None = None  # RGB uint8 (P, P, 3): the object texture
     object_alpha: np.ndarray | None = None  # float32 (P, P): its coverage (disc, anti-aliased edge)
+    # The other figures (SyntheticConfig.people > 1), behind the first, each (patch, alpha, (N, 3, 3) world_from_patch).
+    other_objects: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...] = ()
 
     # ------------------------------------------------------------------ derived truth
     @property
@@ -194,9 +201,15 @@ class SyntheticVideo:
     def world_at(self, t: int) -> np.ndarray:
         """The world canvas with the object composited at its pose of time t (a new array)."""
         canvas = self.world.copy()
-        if self.object_world_from_patch is not None and self.object_patch is not None:
-            _composite(canvas, self.object_patch, self.object_alpha, self.object_world_from_patch[t])
+        for patch, alpha, pose in reversed(self._objects()):  # the first figure in front
+            _composite(canvas, patch, alpha, pose[t])
         return canvas
+
+    def _objects(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Every moving object (patch, alpha, world_from_patch per frame), the one in front first."""
+        if self.object_world_from_patch is None or self.object_patch is None:
+            return []
+        return [(self.object_patch, self.object_alpha, self.object_world_from_patch), *self.other_objects]
 
     def render_view(self, t: int, view_from_frame: np.ndarray, *, sharp: bool = True) -> np.ndarray:
         """Truth for any virtual camera: the world (with the object at time t) seen through
@@ -219,10 +232,11 @@ class SyntheticVideo:
 
     def object_view_mask(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
         """bool (H, W): the object's footprint (coverage >= 0.5) in the view ``view_from_frame`` of frame t."""
-        if self.object_world_from_patch is None or self.object_alpha is None:
-            return np.zeros((self.config.height, self.config.width), bool)
-        view_from_patch = _as3x3(view_from_frame) @ self.frame_from_world[t] @ self.object_world_from_patch[t]
-        return _object_mask(self.object_alpha, view_from_patch, self.config.width, self.config.height)
+        mask = np.zeros((self.config.height, self.config.width), bool)
+        for _, alpha, pose in self._objects():
+            view_from_patch = _as3x3(view_from_frame) @ self.frame_from_world[t] @ pose[t]
+            mask |= _object_mask(alpha, view_from_patch, self.config.width, self.config.height)
+        return mask
 
     def view_coverage(self, t: int, view_from_frame: np.ndarray) -> np.ndarray:
         """bool (H, W): where ``render_view(t, view_from_frame)`` samples inside the world canvas (true truth)."""
@@ -467,17 +481,25 @@ def _object_texture(world_image: str = "") -> tuple[np.ndarray, np.ndarray]:
     return np.clip(np.round(rgb), 0, 255).astype(np.uint8), alpha
 
 
-def _person_texture(cfg: SyntheticConfig) -> tuple[np.ndarray, np.ndarray]:
+_PERSON_CUTS = ((1 / 3, 1 / 3), (2 / 3, 2 / 3), (1 / 2, 1 / 6))  # where the k-th figure's dress is cut (y, x share)
+
+
+def _person_texture(cfg: SyntheticConfig, index: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """A person-sized figure (head on a rounded body, anti-aliased alpha) dressed in a crop of the world
-    photograph rotated half a turn: the background's own colours and texture statistics, other content."""
-    pw = max(int(round(cfg.person_size[0] * cfg.width)), 8)
-    ph = max(int(round(cfg.person_size[1] * cfg.height)), 8)
+    photograph rotated half a turn: the background's own colours and texture statistics, other content. The
+    ``index``-th figure is 0.8**index of the size and cut from another part of the photograph."""
+    size = 0.8 ** index
+    pw = max(int(round(cfg.person_size[0] * cfg.width * size)), 8)
+    ph = max(int(round(cfg.person_size[1] * cfg.height * size)), 8)
     photo = load_image(cfg.image)[::-1, ::-1]
     # Scale the photograph as the world canvas does (about one photo pixel per frame pixel or more).
     scale = max(cfg.width / photo.shape[1], cfg.height / photo.shape[0], 1.0) * 1.3
     photo = cv2.resize(photo, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
-    y0 = max((photo.shape[0] - ph) // 3, 0)
-    x0 = max((photo.shape[1] - pw) // 3, 0)
+    if index == 0:  # (the first figure's cut, exactly as it always was)
+        y0, x0 = max((photo.shape[0] - ph) // 3, 0), max((photo.shape[1] - pw) // 3, 0)
+    else:
+        cut_y, cut_x = _PERSON_CUTS[index % len(_PERSON_CUTS)]
+        y0, x0 = max(int((photo.shape[0] - ph) * cut_y), 0), max(int((photo.shape[1] - pw) * cut_x), 0)
     rgb = np.ascontiguousarray(photo[y0:y0 + ph, x0:x0 + pw])
     if rgb.shape[:2] != (ph, pw):
         rgb = cv2.resize(rgb, (pw, ph), interpolation=cv2.INTER_CUBIC)
@@ -497,11 +519,11 @@ def _person_texture(cfg: SyntheticConfig) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _person_path(cfg: SyntheticConfig, patch_shape: tuple[int, ...], view_centre_x: np.ndarray,
-                 world_shift_y: float) -> np.ndarray:
+                 world_shift_y: float, index: int = 0) -> np.ndarray:
     """(N, 3, 3) world_from_patch: walking across the intended view at a speed drawn per frame from
     ``person_speed_px`` (changes of speed, and of direction near the view's sides or at random), with a small
-    vertical bob. Drawn from its own generator so the camera's draws do not depend on it."""
-    rng = np.random.default_rng((cfg.seed, 7919))
+    vertical bob. Drawn from its own generator (one a figure) so the camera's draws do not depend on it."""
+    rng = np.random.default_rng((cfg.seed, 7919) if index == 0 else (cfg.seed, 7919, index))
     n, w, h = int(cfg.n_frames), int(cfg.width), int(cfg.height)
     ph, pw = patch_shape[:2]
     lo, hi = cfg.person_speed_px
@@ -608,7 +630,9 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
     blurred = default_blurred_frames(n) if cfg.blurred_frames is None else tuple(sorted(set(int(i) for i in cfg.blurred_frames)))
     kernel = motion_blur_kernel(cfg.blur_length_px, cfg.blur_angle_deg)
     intended, jitter = np.stack([icx, icy, ith, izm], axis=1), np.stack([jx, jy, jth, jzm], axis=1)
-    frames, sharp_frames, masks = _render(cfg, world, f_act, intended, jitter, (obj_patch, obj_alpha, obj_pose),
+    others = _other_people(cfg, shift_x, shift_y)
+    objects = ([] if obj_pose is None else [(obj_patch, obj_alpha, obj_pose)]) + list(others)
+    frames, sharp_frames, masks = _render(cfg, world, f_act, intended, jitter, objects,
                                           set(blurred), kernel)
 
     return SyntheticVideo(
@@ -627,6 +651,7 @@ def generate(config: SyntheticConfig = SyntheticConfig()) -> SyntheticVideo:
         object_world_from_patch=obj_pose,
         object_patch=obj_patch,
         object_alpha=obj_alpha,
+        other_objects=others,
     )
 
 
@@ -676,31 +701,46 @@ def _moving_object(cfg: SyntheticConfig, draws: tuple[float, np.ndarray, float, 
     return patch, alpha, pose
 
 
+def _other_people(cfg: SyntheticConfig, shift_x: float, shift_y: float
+                  ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], ...]:
+    """The figures after the first (SyntheticConfig.people), each (patch, alpha, world_from_patch per frame)."""
+    if not cfg.moving_object or cfg.object_kind != "person":
+        return ()
+    view_centre_x = cfg.pan_px_per_frame * np.arange(int(cfg.n_frames), dtype=np.float64) + shift_x
+    others = []
+    for index in range(1, int(cfg.people)):
+        patch, alpha = _person_texture(cfg, index)
+        others.append((patch, alpha, _person_path(cfg, alpha.shape, view_centre_x, shift_y, index)))
+    return tuple(others)
+
+
 def _render(cfg: SyntheticConfig, world: np.ndarray, f_act: np.ndarray, intended: np.ndarray, jitter: np.ndarray,
-            moving: tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None], blurred: set[int],
+            objects: list[tuple[np.ndarray, np.ndarray, np.ndarray]], blurred: set[int],
             kernel: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """(frames, sharp frames, object masks): each frame of the world seen through ``f_act`` (row by row with a
-    rolling shutter, from the camera's ``intended`` and ``jitter`` parameters), the moving object composited at
-    its pose of the frame, frames in ``blurred`` blurred by ``kernel``."""
+    rolling shutter, from the camera's ``intended`` and ``jitter`` parameters), the moving ``objects`` (patch,
+    alpha, world_from_patch per frame; the first in front) composited at their poses of the frame, frames in
+    ``blurred`` blurred by ``kernel``."""
     w, h, n = int(cfg.width), int(cfg.height), int(cfg.n_frames)
-    obj_patch, obj_alpha, obj_pose = moving
     canvas = world.copy()
     frames, sharp_frames, masks = [], [], []
     for i in range(n):
-        saved = None
-        if obj_pose is not None:
-            saved = _composite(canvas, obj_patch, obj_alpha, obj_pose[i])
-        if cfg.readout > 0:  # rows exposed one after another (the object stays at its pose of time i)
+        saved = [_composite(canvas, patch, alpha, pose[i]) for patch, alpha, pose in reversed(objects)]
+        if cfg.readout > 0:  # rows exposed one after another (the objects stay at their poses of time i)
             times = i + cfg.readout * np.arange(h) / h
             sharp = _render_rows(canvas, _frames_from_world_at(intended, jitter, times, cfg), w)
         else:
             sharp = cv2.warpAffine(canvas, f_act[i][:2], (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
-        if saved is not None:
-            y0, y1, x0, x1, region = saved
-            canvas[y0:y1, x0:x1] = region
+        for region in reversed(saved):  # undone in the opposite order
+            if region is not None:
+                y0, y1, x0, x1, pixels = region
+                canvas[y0:y1, x0:x1] = pixels
         sharp_frames.append(sharp)
         frames.append(apply_blur(sharp, kernel) if i in blurred else sharp.copy())
-        masks.append(_object_mask(obj_alpha, f_act[i] @ obj_pose[i], w, h) if obj_pose is not None else np.zeros((h, w), bool))
+        mask = np.zeros((h, w), bool)
+        for _, alpha, pose in objects:
+            mask |= _object_mask(alpha, f_act[i] @ pose[i], w, h)
+        masks.append(mask)
     return frames, sharp_frames, masks
 
 

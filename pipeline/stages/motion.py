@@ -2,8 +2,10 @@
 
 Robust feature-based estimation: Shi-Tomasi corners tracked by pyramidal Lucas-Kanade with a
 forward-backward check, then a RANSAC fit of the chosen model (affine by default, similarity or
-homography). Optionally a hierarchical direct refinement in the spirit of Bergen et al.: ECC
-(enhanced correlation coefficient) maximisation coarse-to-fine on an image pyramid.
+homography), seeded by a similarity so that one fit covers one layer, and further motions among the
+outliers where large figures move (which one is the camera's: pipeline/stages/background.py).
+Optionally a hierarchical direct refinement in the spirit of Bergen et al.: ECC (enhanced correlation
+coefficient) maximisation coarse-to-fine on an image pyramid.
 
 Frames that cannot be aligned (featureless, black, a scene cut) fall back to the identity and say why,
 so the camera path is never flung by one bad pair.
@@ -21,15 +23,18 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
+from pipeline.stages.background import CameraChoice
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
 RANSAC_SEED = 0x5EED
-# A second motion is looked for among RANSAC's outliers when they are at least this share of the tracks ...
-ALTERNATIVE_MIN_SHARE = 0.15
+# Another motion is looked for among RANSAC's outliers when they are at least this share of the tracks ...
+ALTERNATIVE_MIN_SHARE = 0.10
+ALTERNATIVE_MIN_TRACKS = 6  # ... and at least this many
+LAYER_MODEL_MIN_TRACKS = 20  # a layer on fewer tracks keeps its similarity: more parameters would fit their noise
+MAX_OTHER_MOTIONS = 2  # motions looked for beside RANSAC's winner (the background and two figures, or three figures)
 ALTERNATIVE_MIN_SHIFT_PX = 6.0  # ... and kept when it moves the frame this much differently (working px): less is
 # depth (parallax between near and far layers of a walk), which the camera path must not jump between
-ALTERNATIVE_PRIOR_PX = 2.0  # the alternative must continue the camera path this much better to be taken
 MOTION_MODELS: tuple[str, ...] = ("affine", "similarity", "homography")
 REFINEMENTS: tuple[str, ...] = ("none", "ecc")
 
@@ -104,6 +109,16 @@ class MotionConfig:
 
 
 @dataclass(frozen=True)
+class OtherMotion:
+    """A motion of the pair other than the camera's: a moving figure's, full-resolution curr_from_prev and the
+    tracks that follow it (full-resolution px, (M, 2) each)."""
+
+    curr_from_prev: np.ndarray
+    prev_points: np.ndarray
+    curr_points: np.ndarray
+
+
+@dataclass(frozen=True)
 class MotionEstimate:
     """Motion of one frame relative to the previous one, with what the estimate rests on."""
 
@@ -118,14 +133,12 @@ class MotionEstimate:
     prev_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     curr_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     inliers: np.ndarray = field(default_factory=lambda: np.zeros((0,), bool))
-    # The second motion the tracks hold (a large moving object, or the background when the object won RANSAC),
-    # full-resolution 3x3, and the tracks that support it; None when there is none. ``choose_background``
-    # decides which is the camera's.
-    alternative: np.ndarray | None = None
-    alternative_prev_points: np.ndarray | None = None  # (M, 2) its supporting tracks, full-resolution px
-    alternative_curr_points: np.ndarray | None = None
-    chose_alternative: bool = False  # the RANSAC winner was a moving object: the alternative was taken
+    # The other motions the tracks hold (large moving figures, or the background when a figure won RANSAC), with
+    # their tracks; pipeline/stages/background.py decides which motion is the camera's (``with_camera``).
+    others: tuple[OtherMotion, ...] = ()
+    chose_other: bool = False  # RANSAC's winner moved with a figure: the camera took one of the others
     ignored: np.ndarray | None = None  # bool, working size: where prev's features were not used (--ignore*)
+    camera: CameraChoice | None = None  # how the camera's motion was chosen (pipeline/stages/background.py)
 
     @property
     def inlier_ratio(self) -> float:
@@ -184,9 +197,8 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
         prev_points=work.prev_points * to_full,
         curr_points=work.curr_points * to_full,
         inliers=work.inliers,
-        alternative=None if work.alternative is None else geometry.rescale_transform(work.alternative, curr.scale),
-        alternative_prev_points=None if work.alternative is None else work.alternative_points[0] * to_full,
-        alternative_curr_points=None if work.alternative is None else work.alternative_points[1] * to_full,
+        others=tuple(OtherMotion(geometry.rescale_transform(matrix, curr.scale), starts * to_full, ends * to_full)
+                     for matrix, starts, ends in work.others),
         ignored=prev.ignore,
     )
     if failure is None:
@@ -204,6 +216,12 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
     )
 
 
+# A refining pass tracks against curr brought back by an estimate: what LK sees is only the residual motion (a pixel or
+# so), so no pyramid, ten iterations and no backward check suffice (as accurate on synthetic truth as two levels and
+# 30 iterations, at half the cost).
+_REFINE_LK = dict(winSize=(21, 21), maxLevel=0, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 10, 0.01))
+
+
 @dataclass
 class _WorkEstimate:
     curr_from_prev: np.ndarray
@@ -214,8 +232,7 @@ class _WorkEstimate:
     prev_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     curr_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     inliers: np.ndarray = field(default_factory=lambda: np.zeros((0,), bool))
-    alternative: np.ndarray | None = None
-    alternative_points: tuple[np.ndarray, np.ndarray] | None = None  # (prev, curr) tracks supporting it
+    others: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)  # (matrix, prev, curr)
 
 
 def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig,
@@ -238,14 +255,10 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
         if lk_pass == 0:
             prev_pts, curr_pts = _track(prev_gray, curr_gray, corners, lk, config.fb_max_error_px)
         else:
-            # Track again against curr brought back into prev's frame: what LK sees is only the residual
-            # motion (a pixel or so), so no pyramid, ten iterations and no backward check suffice (as accurate
-            # on synthetic truth as two levels and 30 iterations, at half the cost). All tracks take part, and
+            # Track again against curr brought back into prev's frame (_REFINE_LK). All tracks take part, and
             # RANSAC runs tighter, so a compromise fit of pass 1 is not locked in.
             target = _warp_gray(curr_gray, curr_from_prev)
-            refine_lk = dict(winSize=(21, 21), maxLevel=0,
-                             criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 10, 0.01))
-            prev_pts, target_pts = _track(prev_gray, target, result.prev_points, refine_lk, None)
+            prev_pts, target_pts = _track(prev_gray, target, result.prev_points, _REFINE_LK, None)
             curr_pts = geometry.apply(curr_from_prev, target_pts).astype(np.float32)
         if len(prev_pts) < config.min_inliers:
             if lk_pass > 0:
@@ -269,10 +282,11 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
                 break  # refinement only ever improves an accepted estimate: keep pass 1's
             return candidate
         if lk_pass == 0:
-            candidate.alternative, candidate.alternative_points = _second_motion(prev_pts, curr_pts, inliers,
-                                                                               candidate.curr_from_prev, config)
-        else:  # the refining pass tracks against the first motion: the second keeps its first-pass tracks
-            candidate.alternative, candidate.alternative_points = result.alternative, result.alternative_points
+            candidate, others = _largest_first(candidate, _other_motions(prev_pts, curr_pts, inliers,
+                                                                         candidate.curr_from_prev, config))
+            candidate.others = [(matrix, prev_pts[index], curr_pts[index]) for matrix, index in others]
+        else:  # the refining pass tracks against the first motion: the others keep their first-pass tracks
+            candidate.others = result.others
         result = candidate
         curr_from_prev = result.curr_from_prev
     inl = result.inliers
@@ -281,23 +295,45 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
     return result
 
 
-def _second_motion(prev_pts: np.ndarray, curr_pts: np.ndarray, inliers: np.ndarray, first: np.ndarray,
-                   config: MotionConfig) -> tuple[np.ndarray | None, tuple[np.ndarray, np.ndarray] | None]:
-    """A second consistent motion among the first fit's outliers: RANSAC keeps the motion most tracks agree on,
-    which is a large textured object's once it holds more tracks than the background. None when the outliers
-    are too few (under ALTERNATIVE_MIN_SHARE of the tracks) or agree with nothing, or the motion is the first's."""
-    outliers = ~inliers
-    needed = max(config.min_inliers, int(ALTERNATIVE_MIN_SHARE * len(inliers)))
-    if outliers.sum() < needed:
-        return None, None
-    matrix, mask = _fit_model(prev_pts[outliers], curr_pts[outliers], config)
-    if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < needed:
-        return None, None
-    second = geometry.to_3x3(matrix)
-    if corner_shift(second, first, prev_pts) < ALTERNATIVE_MIN_SHIFT_PX:
-        return None, None
-    support = mask.ravel().astype(bool)
-    return second, (prev_pts[outliers][support], curr_pts[outliers][support])
+def _largest_first(first: _WorkEstimate, others: list[tuple[np.ndarray, np.ndarray]]
+                   ) -> tuple[_WorkEstimate, list[tuple[np.ndarray, np.ndarray]]]:
+    """RANSAC's winner is the motion most tracks follow. A similarity-seeded fit can win on fewer tracks than
+    another motion takes once fitted in full (a blurred frame's noisy tracks fit a similarity less well), so the
+    motion with the most tracks goes first; the camera chooser keeps the first where nothing says otherwise."""
+    if not others:
+        return first, others
+    k = max(range(len(others)), key=lambda i: len(others[i][1]))
+    if len(others[k][1]) <= first.n_inliers:
+        return first, others
+    matrix, index = others[k]
+    inliers = np.zeros(len(first.inliers), bool)
+    inliers[index] = True
+    swapped = dataclasses.replace(first, curr_from_prev=matrix, inliers=inliers, n_inliers=int(inliers.sum()))
+    return swapped, [(first.curr_from_prev, np.flatnonzero(first.inliers))] + others[:k] + others[k + 1:]
+
+
+def _other_motions(prev_pts: np.ndarray, curr_pts: np.ndarray, inliers: np.ndarray, first: np.ndarray,
+                   config: MotionConfig) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Up to MAX_OTHER_MOTIONS further motions among the first fit's outliers, one after another (each among what
+    the ones before left): RANSAC keeps the motion most tracks agree on, which is a large textured figure's once it
+    holds more tracks than the background, and where several figures walk each moves its own way. A motion needs
+    ALTERNATIVE_MIN_SHARE of the tracks (at least ALTERNATIVE_MIN_TRACKS) and must move the frame at least
+    ALTERNATIVE_MIN_SHIFT_PX differently from each found before. (matrix, its tracks' indices) each, working px."""
+    needed = max(ALTERNATIVE_MIN_TRACKS, int(ALTERNATIVE_MIN_SHARE * len(inliers)))
+    left = ~inliers
+    found: list[tuple[np.ndarray, np.ndarray]] = []
+    while len(found) < MAX_OTHER_MOTIONS and left.sum() >= needed:
+        index = np.flatnonzero(left)
+        matrix, mask = _fit_model(prev_pts[index], curr_pts[index], config)
+        if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < needed:
+            break
+        motion = geometry.to_3x3(matrix)
+        support = index[mask.ravel().astype(bool)]
+        left[support] = False
+        if min(corner_shift(motion, m, prev_pts) for m in [first, *(f[0] for f in found)]) < ALTERNATIVE_MIN_SHIFT_PX:
+            continue  # depth within one layer (parallax), not a motion of its own; its tracks are set aside
+        found.append((motion, support))
+    return found
 
 
 def corner_shift(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> float:
@@ -307,60 +343,20 @@ def corner_shift(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> float:
     return float(np.mean(np.linalg.norm(geometry.apply(a, corners) - geometry.apply(b, corners), axis=1)))
 
 
-def choose_background(estimate: MotionEstimate, previous: MotionEstimate | None, width: int,
-                      height: int) -> MotionEstimate:
-    """The camera's motion between the two motions a pair holds (RANSAC keeps the one most tracks agree on,
-    which is a large textured object's once it holds more tracks than the background).
-
-    With no pair before (the first pair, or after a failed one), by spread: the background surrounds what moves
-    in front of it, so its tracks spread wider. Where the pair before also held two motions, by place: this pair's tracks start in the frame the pair before
-    ended in, so each of its tracks is labelled by the nearest track end of the pair before (background or
-    object); the motion whose tracks lie mostly in the background's places is the camera's. An object moves
-    10-25 px a frame, far less than its own size, so the places carry over. Otherwise the motion RANSAC kept stays
-    when it holds the most tracks and they spread wider (both cues say background), and else the camera's is the
-    motion that continues the previous pair's camera motion better by ALTERNATIVE_PRIOR_PX. Continuity alone is
-    weak: a hand's shake can change the camera's motion by 10-15 px from one pair to the next, so a small object
-    moving like the last pair's camera once took the camera's place (the demo's frames 42, 49 and 52)."""
-    if estimate.alternative is None or estimate.status != "ok":
-        return estimate
-    swap = False
-    kept_points = estimate.prev_points[estimate.inliers]
-    if previous is None or previous.status != "ok":
-        # A robust bounding box: wider for the background unless the object fills the frame edge to edge.
-        swap = _spread(estimate.alternative_prev_points) > _spread(kept_points)
-    elif previous.alternative is not None and len(kept_points):
-        background_ends = previous.curr_points[previous.inliers]  # in this pair's first frame
-        object_ends = previous.alternative_curr_points
-        ends = np.concatenate([background_ends, object_ends])
-        is_background = np.r_[np.ones(len(background_ends), bool), np.zeros(len(object_ends), bool)]
-        import scipy.spatial  # here: only pairs holding two motions need it
-
-        tree = scipy.spatial.cKDTree(ends)
-        kept = is_background[tree.query(kept_points, k=1)[1]].mean()
-        other = is_background[tree.query(estimate.alternative_prev_points, k=1)[1]].mean()
-        swap = other > kept
-    elif not (len(kept_points) >= len(estimate.alternative_prev_points)
-              and _spread(kept_points) > _spread(estimate.alternative_prev_points)):
-        corners = geometry.frame_corners(width, height)
-        kept = corner_shift(estimate.curr_from_prev, previous.curr_from_prev, corners)
-        other = corner_shift(estimate.alternative, previous.curr_from_prev, corners)
-        swap = other + ALTERNATIVE_PRIOR_PX < kept
-    if not swap:
-        return estimate
+def with_camera(estimate: MotionEstimate, choice: CameraChoice) -> MotionEstimate:
+    """The estimate with the camera's motion the one ``choice`` took (pipeline/stages/background.py: 0 RANSAC's
+    winner, k the k-th other motion): that motion and its tracks become the estimate's, RANSAC's winner one of the
+    others."""
+    if choice.taken == 0:
+        return dataclasses.replace(estimate, camera=choice)
+    taken = estimate.others[choice.taken - 1]
+    winner = OtherMotion(estimate.curr_from_prev, estimate.prev_points[estimate.inliers],
+                         estimate.curr_points[estimate.inliers])
+    others = (winner, *(m for i, m in enumerate(estimate.others) if i != choice.taken - 1))
     return dataclasses.replace(
-        estimate, curr_from_prev=estimate.alternative, alternative=estimate.curr_from_prev,
-        prev_points=estimate.alternative_prev_points, curr_points=estimate.alternative_curr_points,
-        inliers=np.ones(len(estimate.alternative_prev_points), bool), n_inliers=len(estimate.alternative_prev_points),
-        alternative_prev_points=kept_points, alternative_curr_points=estimate.curr_points[estimate.inliers],
-        chose_alternative=True)
-
-
-def _spread(points: np.ndarray) -> float:
-    """Area of the 2nd-98th percentile box of (N, 2) points."""
-    if len(points) < 2:
-        return 0.0
-    lo, hi = np.percentile(points, 2, axis=0), np.percentile(points, 98, axis=0)
-    return float(np.prod(hi - lo))
+        estimate, curr_from_prev=taken.curr_from_prev, prev_points=taken.prev_points, curr_points=taken.curr_points,
+        inliers=np.ones(len(taken.prev_points), bool), n_inliers=len(taken.prev_points), others=others,
+        chose_other=True, camera=choice)
 
 
 def _detect_corners(gray: np.ndarray, config: MotionConfig) -> np.ndarray:
@@ -410,12 +406,49 @@ def _warp_gray(curr_gray: np.ndarray, curr_from_prev: np.ndarray) -> np.ndarray:
 
 
 def _fit_model(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig, *, tight: bool = False):
+    """RANSAC's fit of the configured model; the first (not ``tight``) fit of a layer seeds it with a similarity
+    (``_fit_layer``). Returns (2x3 or 3x3 matrix or None, (N, 1) uint8 inlier mask or None), as OpenCV's fits."""
     threshold = config.ransac_threshold_px * (0.5 if tight else 1.0)
+    if not tight and config.model != "similarity":
+        return _fit_layer(prev_pts, curr_pts, config, threshold)
     if config.model == "homography":
         return cv2.findHomography(prev_pts, curr_pts, cv2.RANSAC, threshold, maxIters=2000, confidence=0.995)
     fit = cv2.estimateAffine2D if config.model == "affine" else cv2.estimateAffinePartial2D
     return fit(prev_pts, curr_pts, method=cv2.RANSAC, ransacReprojThreshold=threshold,
                maxIters=2000, confidence=0.995, refineIters=20)
+
+
+def _fit_layer(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig, threshold: float):
+    """One rigid layer's motion: RANSAC over a similarity (4 parameters) finds the layer's tracks, then the
+    configured model is fitted to them by least squares and takes every track it explains, twice. RANSAC over an
+    affine or a homography directly can explain two layers at once (a stretch that moves the background on one side
+    of a large figure and the figure on the other, each within the threshold); a similarity cannot."""
+    seed, mask = cv2.estimateAffinePartial2D(prev_pts, curr_pts, method=cv2.RANSAC, ransacReprojThreshold=threshold,
+                                             maxIters=2000, confidence=0.995, refineIters=20)
+    if seed is None or mask is None or int(mask.sum()) < LAYER_MODEL_MIN_TRACKS:
+        return seed, mask
+    matrix, inliers = seed, mask.ravel().astype(bool)
+    for _ in range(2):
+        fitted = _least_squares(prev_pts[inliers], curr_pts[inliers], config.model)
+        if fitted is None:
+            break
+        error = np.linalg.norm(geometry.apply(geometry.to_3x3(fitted), prev_pts) - curr_pts, axis=1)
+        matrix, inliers = fitted, error < threshold
+    return matrix, inliers.astype(np.uint8).reshape(-1, 1)
+
+
+def _least_squares(prev_pts: np.ndarray, curr_pts: np.ndarray, model: str) -> np.ndarray | None:
+    """The affine (2x3) or homography (3x3) fitting the point pairs best, None with too few of them."""
+    if model == "homography":
+        if len(prev_pts) < 4:
+            return None
+        matrix, _ = cv2.findHomography(prev_pts, curr_pts, 0)
+        return matrix
+    if len(prev_pts) < 3:
+        return None
+    design = np.hstack([prev_pts.astype(np.float64), np.ones((len(prev_pts), 1))])
+    solution, _, rank, _ = np.linalg.lstsq(design, curr_pts.astype(np.float64), rcond=None)
+    return solution.T if rank == 3 else None
 
 
 def _refine_ecc(prev_gray: np.ndarray, curr_gray: np.ndarray, start: _WorkEstimate,
