@@ -127,6 +127,8 @@ def test_a_4k_recording_holds_its_pictures_at_the_recorded_size(uhd_recording):
         assert recording.image(entity, 3).shape == (540, 960)
     assert recording.map(ent.COMPLETION_VARIANCE, 3).shape == (540, 960)
     assert recording.image(ent.trace_image(4), 4, ent.FRAME_TIMELINE).shape[:2] == (540, 960)  # traced frames too
+    about = recording.texts(ent.META, "TextDocument:text")[-1]
+    assert "at 960x540 (the input's 3840x2160 scaled by 0.25)" in about  # the about tab states the size
 
 
 def test_a_4k_recordings_classes_are_the_pipelines_and_its_statistics_full_resolution(uhd_recording):

@@ -18,9 +18,9 @@ score per state, places and continuity a score per pair of states; `CameraChoose
 programming (Viterbi) with a bounded look-ahead: pairs are decided `LAG_PAIRS` at a time, each once at least as many
 after it are known, with the pair before them fixed as decided. So a pair with no evidence of its own follows the
 pairs linked to it, a run of pairs with misleading evidence is outvoted by the linked pairs around it, and memory
-does not grow with the clip. Where
-there is no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear occlusion is worth up to 3, a sure
-link 10, a jump of the camera's motion by a fifth of the frame up to 8.
+does not grow with the clip. Where there is no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear
+occlusion is worth up to 3 (half to each pair around the frame it is seen at), a sure link 10, a jump of the camera's
+motion by a fifth of the frame up to 8.
 """
 
 from __future__ import annotations
@@ -43,6 +43,8 @@ SHARPNESS_RATIO = 1.3  # the test is skipped where one frame's gradient energy e
 VOTE_FLOOR = 10.0  # occlusion votes (px at ANALYSIS_SIDE) a motion's lead must exceed to count: noise below
 VOTE_SCALE = 40.0  # votes beyond the floor for one unit of log-odds ...
 VOTE_CAP = 3.0  # ... and at most this many units a pair
+FRAME_TEST_SHARE = 0.5  # each pair takes this share of a frame test's evidence: the test at frame t votes for both
+# pairs around t, and a chain of linked pairs would count one occlusion twice
 SHAKE_FLOOR = 0.005  # of the frame's diagonal: the least scale of the camera's changes of motion (a tripod's are ~0)
 SHAKE_PAIRS = 300  # the camera's last changes of motion the scale is taken from
 CONTINUITY_FREE = 2.0  # shakes: a change of the camera's motion within this many costs nothing
@@ -81,7 +83,7 @@ class PairLayers:
         votes = np.asarray(self.behind, float) - np.asarray(self.in_front, float)
         lead = votes - np.array([np.delete(votes, k).max() for k in range(len(votes))])
         lead = np.sign(lead) * np.maximum(np.abs(lead) - VOTE_FLOOR, 0.0)  # a few pixels are noise, not evidence
-        return np.clip(lead / VOTE_SCALE, -VOTE_CAP, VOTE_CAP) / 2.0
+        return FRAME_TEST_SHARE * np.clip(lead / VOTE_SCALE, -VOTE_CAP, VOTE_CAP) / 2.0
 
     @functools.cached_property
     def _own(self) -> np.ndarray:
