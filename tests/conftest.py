@@ -27,19 +27,29 @@ def shared_videos() -> Path:
     return SHARED_VIDEOS
 
 
-@pytest.fixture(scope="session")
-def uhd_recording(tmp_path_factory):
-    """A short 3840x2160 synthetic clip stabilized in full mode and recorded at the default size (frame 4 traced):
-    (the .rrd, the recorder). Shared by the recording-size and the browser tests."""
+def _recorded_synthetic(folder, width: int, height: int):
+    """An 8-frame synthetic clip of width x height stabilized in full mode and recorded at the default size (frame 4
+    traced): (the .rrd, the recorder)."""
     from ffviz.recorder import RerunRecorder
     from pipeline.evaluation import synthetic
     from pipeline.stabilize import StabilizeConfig, stabilize
 
-    folder = tmp_path_factory.mktemp("uhd")
-    clip = folder / "uhd.mp4"
-    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=3840, height=2160, n_frames=8, seed=3)),
+    clip = folder / "clip.mp4"
+    synthetic.write_video(synthetic.generate(synthetic.SyntheticConfig(width=width, height=height, n_frames=8, seed=3)),
                           clip)
-    rrd = folder / "uhd.rrd"
+    rrd = folder / "clip.rrd"
     recorder = RerunRecorder(rrd, trace_frames=[4])
     stabilize(clip, None, StabilizeConfig(), observer=recorder)
     return rrd, recorder
+
+
+@pytest.fixture(scope="session")
+def uhd_recording(tmp_path_factory):
+    """A 3840x2160 clip's recording (``_recorded_synthetic``), shared by the recording-size and the browser tests."""
+    return _recorded_synthetic(tmp_path_factory.mktemp("uhd"), 3840, 2160)
+
+
+@pytest.fixture(scope="session")
+def portrait_recording(tmp_path_factory):
+    """A 1080x1920 (portrait phone) clip's recording (``_recorded_synthetic``)."""
+    return _recorded_synthetic(tmp_path_factory.mktemp("portrait"), 1080, 1920)

@@ -324,15 +324,17 @@ def test_a_real_full_recording_opens_on_frame_0_and_steps_to_the_last(real_recor
             f"{tmp_path}/last.png")
 
 
-def test_a_4k_recording_opens_on_frame_0_in_the_browser(uhd_recording, tmp_path):
-    """Recorded at the viewing size, a 3840x2160 clip's recording opens in the web viewer on frame 0."""
+@pytest.mark.parametrize("clip, recorded", [("uhd_recording", (540, 960)), ("portrait_recording", (960, 540))])
+def test_a_phone_sized_recording_opens_on_frame_0_in_the_browser(clip, recorded, request, tmp_path):
+    """Recorded at the viewing size, a 3840x2160 clip's and a 1080x1920 portrait clip's recordings open in the web
+    viewer on frame 0 (the portrait one in its side-by-side layout)."""
     from ffviz import entities as ent
     from ffviz.rrd import Recording
 
-    rrd, recorder = uhd_recording
+    rrd, recorder = request.getfixturevalue(clip)
     recording = Recording.load(rrd)
     first, last = recording.image(ent.INPUT_FRAME, 0), recording.image(ent.INPUT_FRAME, 7)
-    assert first.shape[:2] == (recorder.view.height, recorder.view.width) == (540, 960)
+    assert first.shape[:2] == (recorder.view.height, recorder.view.width) == recorded
     with web_viewer_page(rrd, tmp_path / "profile") as (devtools, url, navigated):
         scores = []
 
