@@ -84,7 +84,8 @@ def test_one_layer_is_fitted_where_an_affine_could_explain_two():
 
 def test_occlusion_votes_put_the_moving_square_in_front(tmp_path):
     """A textured square moving 12 px a frame over a textured background moving 3 px: the pixels it uncovers and
-    covers move with the background, whichever of the two motions RANSAC ranked first."""
+    covers move with the background, whichever of the two motions RANSAC ranked first, and with the middle frame
+    motion-blurred."""
     rng = np.random.default_rng(0)
 
     def texture(shape: tuple[int, int]) -> np.ndarray:  # blotches of about 10 px, 0..255
@@ -99,14 +100,20 @@ def test_occlusion_votes_put_the_moving_square_in_front(tmp_path):
         view[80:240, x:x + 160] = patch
         return np.clip(view, 0, 255).astype(np.uint8)
 
-    grays = [frame(t) for t in range(3)]
+    sharp = [frame(t) for t in range(3)]
+    # the middle frame motion-blurred (21 px along the walk): the sharp frames are compared at its sharpness
+    streak = cv2.blur(sharp[1], (21, 1))
+    energy = [float(np.mean(cv2.Sobel(g.astype(np.float32), cv2.CV_32F, 1, 0) ** 2)) for g in (sharp[0], streak)]
+    assert energy[0] > 2 * background.SHARPNESS_RATIO * energy[1]
     camera, square = shift(-3.0), shift(9.0)
     for motions in ((camera, square), (square, camera)):
-        votes_in, votes_out = background.occlusion_votes(grays, 1.0, motions, motions, [0, 1])
         cam = 0 if motions[0] is camera else 1
-        for votes in (votes_in, votes_out):
+        for votes in background.occlusion_votes(sharp, 1.0, motions, motions, [0, 1]):
             assert votes.behind[cam] > 10 and votes.behind[1 - cam] < votes.behind[cam] / 10
             assert votes.in_front[1 - cam] > 10 and votes.in_front[cam] < votes.in_front[1 - cam] / 10
+        for votes in background.occlusion_votes([sharp[0], streak, sharp[2]], 1.0, motions, motions, [0, 1]):
+            net = np.subtract(votes.behind, votes.in_front)  # fainter through the blur, the same way round
+            assert net[cam] - net[1 - cam] > 2 * background.VOTE_FLOOR
 
 
 def chain(n: int, links: np.ndarray = np.array([[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]])) -> list:

@@ -38,8 +38,10 @@ ANALYSIS_SIDE = 320  # px: the three frames of the occlusion test are compared a
 UNEXPLAINED = 14.0  # grey levels: a pixel farther than this from what every motion brings there is unexplained
 EXPLAINED = 6.0  # grey levels: a pixel this close to what one motion brings, and ...
 EXPLAINED_MARGIN = 4.0  # ... this much closer than every other motion brings, moves with that motion
-SHARPNESS_RATIO = 1.3  # the test is skipped where one frame's gradient energy exceeds another's by more: a blurred
-# frame leaves every edge unexplained by a sharp one's
+SHARPNESS_RATIO = 1.3  # a frame whose gradient energy exceeds the blurriest's by more is blurred to match (a blurred
+# frame leaves every edge unexplained by a sharp one's) ...
+MATCH_SIGMAS = (0.5, 0.75, 1.0, 1.4, 2.0, 2.8, 4.0)  # ... by the least of these Gaussians (px at ANALYSIS_SIDE) that
+# brings it within the ratio; where none does, the test is skipped
 VOTE_FLOOR = 10.0  # occlusion votes (px at ANALYSIS_SIDE) a motion's lead must exceed to count: noise below
 VOTE_SCALE = 40.0  # votes beyond the floor for one unit of log-odds ...
 VOTE_CAP = 3.0  # ... and at most this many units a pair
@@ -269,7 +271,8 @@ def occlusion_votes(grays: Sequence[np.ndarray], scale: float, pair_in: Sequence
     """The occlusion test at frame t (module docstring). ``grays``: frames t-1, t, t+1 (working size, ``scale``
     of full); ``pair_in``, ``pair_out``: the motions (full px, curr_from_prev) of (t-1, t) and (t, t+1); ``same``:
     for each motion of pair_out, the motion of pair_in that is the same layer (``same_layers``), -1 for none.
-    Returns the votes of pair_in's motions and of pair_out's; none where the frames' sharpness differs.
+    Returns the votes of pair_in's motions and of pair_out's; none where a frame's sharpness cannot be matched
+    (``_analysis_frames``).
 
     Uncovered at t: no motion of pair_in explains the pixel, one motion of pair_out alone does (the layer behind),
     and that layer's motion in pair_in takes it back onto a pixel of t-1 another motion of pair_in explains alone
@@ -363,12 +366,26 @@ def _occlusion(pixels: np.ndarray, alone_there: list[np.ndarray], own: int, ther
 
 
 def _analysis_frames(grays: Sequence[np.ndarray]) -> list[np.ndarray] | None:
-    """The three frames at ANALYSIS_SIDE as float32, or None where their sharpness differs too much."""
+    """The three frames at ANALYSIS_SIDE as float32, the sharper ones blurred to the blurriest's sharpness (within
+    SHARPNESS_RATIO of its gradient energy), so that a motion-blurred frame among sharp ones is compared at one
+    sharpness; None where a frame cannot be matched."""
     factor = min(1.0, ANALYSIS_SIDE / max(grays[1].shape))
     frames = [cv2.resize(g, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA).astype(np.float32)
               if factor < 1.0 else g.astype(np.float32) for g in grays]
     energy = [_gradient_energy(f) for f in frames]
-    return None if max(energy) > SHARPNESS_RATIO * max(min(energy), 1e-6) else frames
+    target = SHARPNESS_RATIO * max(min(energy), 1e-6)
+    matched = [frame if sharpness <= target else _blurred_to(frame, target) for frame, sharpness in zip(frames, energy)]
+    return None if any(frame is None for frame in matched) else matched
+
+
+def _blurred_to(frame: np.ndarray, energy: float) -> np.ndarray | None:
+    """``frame`` blurred by the least of MATCH_SIGMAS that brings its gradient energy down to ``energy``; None if
+    none does."""
+    for sigma in MATCH_SIGMAS:
+        blurred = cv2.GaussianBlur(frame, (0, 0), sigma)
+        if _gradient_energy(blurred) <= energy:
+            return blurred
+    return None
 
 
 def _explained_alone(residuals: list[tuple[np.ndarray, np.ndarray]]) -> list[np.ndarray]:
