@@ -12,7 +12,7 @@ import pytest
 from ffviz import blueprint, entities as ent
 from ffviz.recorder import RerunRecorder
 from ffviz.recording.backlog import Backlog
-from ffviz.recording.view import RECORD_SIZE, ViewSize, parse_record_size
+from ffviz.recording.view import RECORD_SIZE, ViewSize, _majority_nonzero, parse_record_size
 from ffviz.rrd import Recording
 from pipeline.evaluation import synthetic
 from pipeline.stabilize import StabilizeConfig, stabilize
@@ -55,6 +55,21 @@ def test_class_maps_keep_exact_classes_and_thin_bands(shape, long_side, seed):
                 assert counts[small[i, j]] == counts.max()
     band_col = max(j for j, (first, _) in enumerate(cols) if first <= 3)
     assert (small[:, band_col] == 200).all()
+
+
+@pytest.mark.parametrize("shape, long_side", [((1920, 1080), 960), ((2160, 3840), 960), ((720, 1280), 960),
+                                              ((1080, 1920), 997), ((257, 431), 100)])
+def test_class_maps_count_only_the_occupied_blocks_and_lose_no_pixel(shape, long_side):
+    """The majority is counted only where the area-averaged non-zero mask says a block holds a class: the same map
+    as counting every block, down to single pixels at any block's edge, at integer and fractional scales."""
+    rng = np.random.default_rng(3)
+    view = ViewSize.of(shape[1], shape[0], long_side)
+    classes = np.zeros(shape, np.uint8)
+    classes[rng.random(shape) < 0.0005] = 9  # lone pixels, some at blocks' edges
+    classes[:, :5] = rng.integers(0, 4, (shape[0], 5))  # a border strip of mixed classes
+    everywhere = np.full((view.height, view.width), 255, np.uint8)
+    assert np.array_equal(view.classes(classes), _majority_nonzero(classes, view.height, view.width, everywhere))
+    assert np.count_nonzero(view.classes(classes) == 9) > 0
 
 
 def test_float_maps_and_flow_are_means_of_the_values_under_each_pixel():

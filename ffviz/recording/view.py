@@ -67,7 +67,16 @@ class ViewSize:
         """A class map (uint8): each recorded pixel the commonest non-zero class under it, 0 where all are 0."""
         if self._fits(classes):
             return classes
-        return _majority_nonzero(np.ascontiguousarray(classes, np.uint8), self.height, self.width)
+        classes = np.ascontiguousarray(classes, np.uint8)
+        return _majority_nonzero(classes, self.height, self.width, self._occupied(classes))
+
+    def _occupied(self, classes: np.ndarray) -> np.ndarray:
+        """The recorded pixels whose input block may hold a non-zero class: the area-averaged non-zero mask, widened
+        by a recorded pixel (a block's edge row or column can weigh next to nothing in the average). Class maps are
+        zero outside the missing area, so the majority is counted on a few blocks only."""
+        _, nonzero = cv2.threshold(classes, 0, 255, cv2.THRESH_BINARY)
+        averaged = cv2.resize(nonzero, (self.width, self.height), interpolation=cv2.INTER_AREA)
+        return cv2.dilate(averaged, np.ones((3, 3), np.uint8))
 
     def mask(self, mask: np.ndarray) -> np.ndarray:
         """A boolean mask: true where any pixel under the recorded one is."""
@@ -106,8 +115,9 @@ class ViewSize:
 
 
 @njit(cache=True, nogil=True)
-def _majority_nonzero(classes: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Per output pixel, the commonest non-zero class of the input block it covers (0 where all are 0)."""
+def _majority_nonzero(classes: np.ndarray, height: int, width: int, occupied: np.ndarray) -> np.ndarray:
+    """Per output pixel, the commonest non-zero class of the input block it covers (0 where all are 0; blocks not
+    ``occupied`` are taken to be all 0)."""
     in_h, in_w = classes.shape
     out = np.zeros((height, width), np.uint8)
     counts = np.zeros(256, np.int32)
@@ -115,6 +125,8 @@ def _majority_nonzero(classes: np.ndarray, height: int, width: int) -> np.ndarra
         r0 = (i * in_h) // height
         r1 = max(((i + 1) * in_h) // height, r0 + 1)
         for j in range(width):
+            if occupied[i, j] == 0:
+                continue
             c0 = (j * in_w) // width
             c1 = max(((j + 1) * in_w) // width, c0 + 1)
             first = 0
