@@ -115,7 +115,7 @@ def margin_spread(n_seeds: int, report: Path | None) -> None:
             s = dynamic_scores(video)
             margins.append(s.synthesized_psnr - s.mosaic_telea_psnr)
             print(f"{name} seed {seed}: {margins[-1]:+.2f}", flush=True)
-        line = (f"| {name.removesuffix(' border')} | {sweep} | {' '.join(f'{m:+.2f}' for m in margins)} | "
+        line = (f"| {name} | {sweep} | {' '.join(f'{m:+.2f}' for m in margins)} | "
                 f"{statistics.median(margins):+.2f} | {min(margins):+.2f} | {max(margins):+.2f} |")
         lines.append(line)
         print(line, flush=True)
