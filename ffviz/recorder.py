@@ -24,6 +24,7 @@ from ffviz import entities as ent, trace
 from ffviz.blueprint import TAB_NOTES, default_blueprint
 from ffviz.recording import about, digest, legends
 from ffviz.recording.backlog import BUDGET_BYTES, Backlog
+from ffviz.recording.columns import ColumnBuffer, Row
 from ffviz.recording.encoders import VideoTrack, png
 from ffviz.recording.sink import RecordingFile
 from ffviz.recording.view import RECORD_SIZE, ViewSize
@@ -50,6 +51,9 @@ LIVE_BATCHER = rr.ChunkBatcherConfig(flush_tick=2.0, flush_num_bytes=4 << 20, fl
 # The SDK holds what it was given until a flush (rerun 0.41: its batcher's byte limit does not bound it), so the
 # recorder flushes each time this much was logged since the last: the SDK's part of the memory stays bounded.
 FLUSH_BYTES = 8 << 20  # each flush adds a few kB of schemas per entity to the file: about 1 % at this size
+# Per-frame rows (scalars, encoded pictures, video samples) are held and sent as one column per entity every this
+# many frames (recording/columns.py): a log call's fixed cost paid once for them all; half a second behind live.
+COLUMN_FRAMES = 16
 
 
 class RerunRecorder:
@@ -102,6 +106,8 @@ class RerunRecorder:
         self._backlog = Backlog(backlog_bytes) if threaded else None
         self.flush_bytes = FLUSH_BYTES
         self._unflushed = 0  # bytes logged since the SDK was last flushed
+        self._columns = ColumnBuffer(self.rec, self._sent)  # per-frame rows, sent as columns every few frames
+        self._frames_unsent = 0
         self._frames_planned: int | None = None  # the frames the path plan has (on_path)
         self._frames_handed = 0  # frames handed to on_frame so far
         self._video_done = False  # every frame handed over and the run past its frame loop: the video was written
@@ -209,18 +215,21 @@ class RerunRecorder:
         self._set_time(view.stamp)
         for item in view.logged:
             started = time.thread_time()
-            for timeline, sequence in item.times:
-                self.rec.set_time(timeline, sequence=sequence)
-            self.rec.log(item.entity, item.archetype)
-            for timeline, _ in item.times:
-                self.rec.disable_timeline(timeline)
+            if isinstance(item.archetype, Row) and not item.times:
+                self._columns.add(item.entity, item.archetype, view.stamp.index, view.stamp.time_s)
+            else:
+                for timeline, sequence in item.times:
+                    self.rec.set_time(timeline, sequence=sequence)
+                self.rec.log(item.entity, item.loggable)
+                for timeline, _ in item.times:
+                    self.rec.disable_timeline(timeline)
             self.cpu_by_family[digest.family(item.entity)] += time.thread_time() - started
         self._unflushed += sum(item.nbytes for item in view.logged)
         for entity, rgb in view.streams:
             started = time.thread_time()
             track = self._tracks.get(entity)
             if track is None:
-                track = self._tracks[entity] = VideoTrack(self.rec, entity, self._fps)
+                track = self._tracks[entity] = VideoTrack(self.rec, entity, self._fps, self._columns)
             sent = track.bytes
             track.add(view.stamp, rgb)
             self._unflushed += track.bytes - sent
@@ -228,10 +237,21 @@ class RerunRecorder:
         self._flush_when_due()
 
     def _flush_when_due(self) -> None:
-        """Hand the SDK's held data to the file once ``flush_bytes`` were logged since the last flush."""
+        """Send the held rows every COLUMN_FRAMES frames, and hand the SDK's held data to the file once
+        ``flush_bytes`` were logged since the last flush."""
+        self._frames_unsent += 1
+        if self._frames_unsent >= COLUMN_FRAMES or self._unflushed >= self.flush_bytes:
+            self._send_columns()
         if self._unflushed >= self.flush_bytes:
             self.rec.flush()
             self._unflushed = 0
+
+    def _send_columns(self) -> None:
+        self._columns.send()
+        self._frames_unsent = 0
+
+    def _sent(self, entity: str, seconds: float) -> None:
+        self.cpu_by_family[digest.family(entity)] += seconds
 
     def _log_start(self) -> None:
         self._log_meta()
@@ -269,17 +289,21 @@ class RerunRecorder:
         width, height = self._size
         dx, dy, angle, scale = geometry.decompose(estimate.curr_from_prev, width, height)
         for name, value in zip(ent.MOTION_PARAM_NAMES, (dx, dy, angle, scale)):
-            self.rec.log(f"{ent.MOTION_PARAMS}/{name}", rr.Scalars(value))
-        self.rec.log(ent.MOTION_INLIERS, rr.Scalars(estimate.n_inliers))
-        self.rec.log(ent.MOTION_INLIER_RATIO, rr.Scalars(estimate.inlier_ratio))
-        self.rec.log(ent.MOTION_RESIDUAL, rr.Scalars(estimate.residual_px))
-        self.rec.log(ent.MOTION_STATUS, rr.TextLog(estimate.status))
+            self._scalar(stamp, f"{ent.MOTION_PARAMS}/{name}", value)
+        self._scalar(stamp, ent.MOTION_INLIERS, estimate.n_inliers)
+        self._scalar(stamp, ent.MOTION_INLIER_RATIO, estimate.inlier_ratio)
+        self._scalar(stamp, ent.MOTION_RESIDUAL, estimate.residual_px)
+        self._columns.add(ent.MOTION_STATUS, Row(rr.TextLog, {"text": estimate.status}), stamp.index, stamp.time_s)
         if self.level == "full" and len(estimate.curr_points):
             self._features(estimate)
         self._on_foreground(estimate)
-        self._on_camera_choice(estimate)
+        self._on_camera_choice(stamp, estimate)
         self._on_ignored(estimate.ignored)
         self.cpu_by_family[ent.MOTION_PARAMS.split("/")[0]] += time.thread_time() - started
+        self._flush_when_due()  # its sending counted under each entity's family
+
+    def _scalar(self, stamp: Stamp, entity: str, value: float) -> None:
+        self._columns.add(entity, Row(rr.Scalars, {"scalars": float(value)}), stamp.index, stamp.time_s)
 
     def _features(self, estimate: MotionEstimate) -> None:
         """Tracked corners (green inliers, red outliers) and prev -> curr arrows, in recorded pixels."""
@@ -308,14 +332,14 @@ class RerunRecorder:
             self.rec.log(ent.MOTION_FOREGROUND, rr.Clear(recursive=False))
             self._foreground_shown = False
 
-    def _on_camera_choice(self, estimate: MotionEstimate) -> None:
+    def _on_camera_choice(self, stamp: Stamp, estimate: MotionEstimate) -> None:
         """Which motion the camera took and why (pipeline/stages/background.py): the evidence for it against the best
         other motion in log-odds, charted, and a line naming the motion and what weighed most."""
         choice = estimate.camera
         if choice is None:
             return
         for name in ent.MOTION_CAMERA_EVIDENCE:
-            self.rec.log(f"{ent.MOTION_CAMERA}/{name}", rr.Scalars(getattr(choice, name)))
+            self._scalar(stamp, f"{ent.MOTION_CAMERA}/{name}", getattr(choice, name))
         if choice.rule == "one motion":
             line = "one motion found: the camera's"
         else:
@@ -325,7 +349,7 @@ class RerunRecorder:
             votes = ", ".join(f"{b} behind/{f} in front" for b, f in zip(choice.behind, choice.in_front))
             line = (f"camera: {taken}; decided by {choice.rule} (log-odds for it: occlusion {choice.occlusion:+.1f}, "
                     f"the frames around it {choice.linked:+.1f}; occlusion px of each motion: {votes})")
-        self.rec.log(ent.MOTION_CAMERA_RULE, rr.TextLog(line))
+        self._columns.add(ent.MOTION_CAMERA_RULE, Row(rr.TextLog, {"text": line}), stamp.index, stamp.time_s)
 
     def _on_ignored(self, ignored: np.ndarray | None) -> None:
         """Outline of where features were not used (--ignore boxes, --ignore-mask), logged when it changes."""
@@ -354,6 +378,7 @@ class RerunRecorder:
         self._spec = dataclasses.replace(self._spec, traced=self.traced)
 
     def _on_path(self, plan: PathPlan) -> None:
+        self._send_columns()  # the motion pass's rows
         if plan.smoothing.settings:
             self._planned = (plan.smoothing.planner, plan.smoothing.settings[0])
         self._on_smoothing(plan.smoothing)
@@ -520,6 +545,7 @@ class RerunRecorder:
             self._send_blueprint()
             for track in self._tracks.values():
                 track.close()
+            self._send_columns()
             self._out.finish()
         except Exception as error:  # noqa: BLE001 - the writer's failure, said in one line
             raise self._failure(error, during_run=False) from error

@@ -11,18 +11,18 @@ import numpy as np
 def flow_to_rgb(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndarray:
     """Middlebury-style colour coding: hue = direction, saturation = magnitude; NaN flow (none computed there) in
     NO_VALUE_COLOUR, the grey of every map's "no value" (no flow colour is grey: their value is always full)."""
-    fx, fy = flow[..., 0], flow[..., 1]
+    fx, fy = cv2.split(np.ascontiguousarray(flow, np.float32))  # contiguous copies, changed in place below
     valid = np.isfinite(fx + fy)  # both components finite
-    fx = np.where(valid, fx, np.float32(0)).astype(np.float32, copy=False)
-    fy = np.where(valid, fy, np.float32(0)).astype(np.float32, copy=False)
+    invalid = ~valid
+    fx[invalid] = 0
+    fy[invalid] = 0
     magnitude, angle = cv2.cartToPolar(fx, fy, angleInDegrees=True)
     scale = max_magnitude or max(_percentile_99(magnitude[valid]) if valid.any() else 1.0, 1e-3)
-    hsv = np.empty((*flow.shape[:2], 3), np.uint8)
-    hsv[..., 0] = (angle / 2).astype(np.uint8)
-    # no value: no saturation at the grey's value, which HSV -> RGB turns into that grey
-    hsv[..., 1] = np.where(valid, np.clip(magnitude / scale * 255, 0, 255), 0).astype(np.uint8)
-    hsv[..., 2] = np.where(valid, np.uint8(255), np.uint8(NO_VALUE_COLOUR[0]))
-    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    saturation = np.clip(magnitude / scale * 255, 0, 255).astype(np.uint8)
+    saturation[invalid] = 0  # no value: no saturation at the grey's value, which HSV -> RGB turns into that grey
+    value = np.full(valid.shape, 255, np.uint8)
+    value[invalid] = NO_VALUE_COLOUR[0]
+    return cv2.cvtColor(cv2.merge([(angle / 2).astype(np.uint8), saturation, value]), cv2.COLOR_HSV2RGB)
 
 
 def _percentile_99(values: np.ndarray, most: int = 65536) -> float:

@@ -938,3 +938,72 @@ def test_every_entity_of_the_field_table_is_in_a_recording(full_run, clip, tmp_p
     assert all(timelines <= full_run[0].timelines(e) for e in (ent.OUTPUT_FRAME, ent.INPUT_FRAME))
     assert all(isinstance(t, (tuple, NotRecorded)) or type(t).__name__ == "Nested"
                for row in RECORDED_FIELDS.values() for t in row.values())
+
+
+def test_rows_sent_as_columns_read_back_as_the_same_log_calls_would(tmp_path):
+    """recording/columns.py: scalars, encoded images, depth images, text and arrows (0-3 instances a row) held over
+    several frames and sent as columns read back per frame exactly as one log call a frame writes them, in order
+    where an entity's rows change shape in between (a Clear between held rows, another field given)."""
+    from ffviz.recording.columns import ColumnBuffer, Row
+    from ffviz.recording.encoders import indexed_png, legend_palette, png16
+    rng = np.random.default_rng(3)
+    frames = []
+    for t in range(7):
+        classes = rng.integers(0, 3, (12, 20)).astype(np.uint8)
+        values = rng.integers(0, 4000, (12, 20)).astype(np.uint16)
+        count = t % 4
+        items = [("a/scalar", Row(rr.Scalars, {"scalars": float(rng.normal())})),
+                 ("a/text", Row(rr.TextLog, {"text": f"frame {t}"})),
+                 ("a/classes", Row(rr.EncodedImage, {"blob": indexed_png(classes, legend_palette(((1, "x", (9, 9, 9)),))),
+                                                     "media_type": "image/png", "opacity": 0.99, "draw_order": 10.0})),
+                 ("a/values", Row(rr.EncodedDepthImage, {"blob": png16(values), "media_type": "image/png",
+                                                         "meter": 1.0, "colormap": "viridis", "depth_range": (0.0, t + 1.0)})),
+                 ("a/arrows", Row(rr.Arrows2D, {"origins": rng.normal(size=(count, 2)).astype(np.float32),
+                                                "vectors": rng.normal(size=(count, 2)).astype(np.float32)}, count))]
+        if t == 4:  # another shape for the same entity, then a Clear, between held rows
+            items.append(("a/shape", Row(rr.Scalars, {"scalars": 1.0})))
+        elif t in (2, 5):
+            items.append(("a/shape", Row(rr.EncodedImage, {"blob": png16(values), "media_type": "image/png"})))
+        frames.append(items)
+
+    def record(path, held):
+        rec = rr.RecordingStream("test", recording_id="same")
+        rec.save(str(path))
+        buffer = ColumnBuffer(rec)
+        for t, items in enumerate(frames):
+            rec.set_time(ent.FRAME_TIMELINE, sequence=t)
+            rec.set_time(ent.VIDEO_TIME_TIMELINE, duration=t / 30)
+            for entity, row in items:
+                if held:
+                    buffer.add(entity, row, t, t / 30)
+                else:
+                    rec.log(entity, row.archetype())
+            if t == 4:
+                rec.log("a/shape", rr.Clear(recursive=False))
+            if held and t == 3:
+                buffer.send()
+        buffer.send()
+        rec.flush()
+        rec.disconnect()
+        return Recording.load(path)
+
+    logged, held = record(tmp_path / "logged.rrd", False), record(tmp_path / "held.rrd", True)
+    assert held.entities == logged.entities
+    for entity in ("a/classes", "a/values", "a/shape"):
+        assert held.indices(entity) == logged.indices(entity)
+        for t in logged.indices(entity):
+            np.testing.assert_array_equal(held.image(entity, t), logged.image(entity, t))
+    for entity in ("a/scalar", "a/shape"):
+        for mine, theirs in zip(held.scalars(entity), logged.scalars(entity)):
+            np.testing.assert_array_equal(mine, theirs)
+    assert held.texts("a/text", "TextLog:text") == logged.texts("a/text", "TextLog:text")
+
+    def arrows(recording):
+        rows = []
+        for batch in recording.batches["a/arrows"]:
+            for t, vectors in zip(batch.column(ent.FRAME_TIMELINE).to_pylist(),
+                                  batch.column("Arrows2D:vectors").to_pylist()):
+                rows.append((t, vectors))
+        return sorted(rows)
+    assert arrows(held) == arrows(logged)
+    assert [len(v) for _, v in arrows(held)] == [t % 4 for t in range(7)]

@@ -20,6 +20,7 @@ import rerun as rr
 
 from ffviz import entities as ent, trace, visual
 from ffviz.recording import encoders, legends
+from ffviz.recording.columns import Row
 from ffviz.recording.view import ViewSize
 from pipeline.results import FrameResult, Stamp
 from pipeline.runtime.colour import ColourDescription, display_rgb
@@ -56,12 +57,18 @@ class Spec:
 
 @dataclass(frozen=True)
 class Logged:
-    """One log call: ``archetype`` at ``entity``, at the frame's time and at ``times`` on other timelines."""
+    """One log call: ``archetype`` at ``entity``, at the frame's time and at ``times`` on other timelines. A ``Row``
+    (its fields only) is sent with the entity's rows of the next few frames, as columns (recording/columns.py)."""
 
     entity: str
     archetype: Any
     times: tuple[tuple[str, int], ...] = ()
     nbytes: int = 0  # the pictures' bytes it holds
+
+    @property
+    def loggable(self) -> Any:
+        """What one ``log`` call takes."""
+        return self.archetype.archetype() if isinstance(self.archetype, Row) else self.archetype
 
 
 @dataclass
@@ -110,10 +117,10 @@ class _Builder:
             self.log(entity, rr.Image(np.ascontiguousarray(rgb), color_model="RGB"), times, rgb.nbytes)
         else:
             data = encoders.jpeg(rgb, self.spec.jpeg_quality)
-            self.log(entity, rr.EncodedImage(contents=data, media_type="image/jpeg"), times, len(data))
+            self.log(entity, Row(rr.EncodedImage, {"blob": data, "media_type": "image/jpeg"}), times, len(data))
 
     def png(self, entity: str, data: bytes, **options: Any) -> None:
-        self.log(entity, rr.EncodedImage(contents=data, media_type="image/png", **options), nbytes=len(data))
+        self.log(entity, Row(rr.EncodedImage, {"blob": data, "media_type": "image/png", **options}), nbytes=len(data))
 
     def display(self, rgb: np.ndarray) -> np.ndarray:
         """A frame as a person sees it at the recorded size: 8-bit display RGB by the input's colour description."""
@@ -163,16 +170,16 @@ class _Builder:
             stored = np.zeros(flat.shape, np.uint16)
             stored[where] = np.clip(np.rint(flat[where] / np.float32(step)) + 1, 1, 65535).astype(np.uint16)
             data = encoders.png16(stored.reshape(values.shape))
-            self.log(ent.map_values(entity), rr.EncodedDepthImage(
-                data, media_type="image/png", meter=1.0 / step, colormap=colormap,
-                depth_range=(value_range[0] / step + 1, value_range[1] / step + 1)), nbytes=len(data))
+            self.log(ent.map_values(entity), Row(rr.EncodedDepthImage, {
+                "blob": data, "media_type": "image/png", "meter": 1.0 / step, "colormap": colormap,
+                "depth_range": (value_range[0] / step + 1, value_range[1] / step + 1)}), nbytes=len(data))
 
     def clear(self, *entities: str, recursive: bool = False) -> None:
         for entity in entities:
             self.log(entity, rr.Clear(recursive=recursive))
 
     def scalar(self, entity: str, value: float) -> None:
-        self.log(entity, rr.Scalars(float(value)))
+        self.log(entity, Row(rr.Scalars, {"scalars": float(value)}))
 
 
 def _finite(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -272,9 +279,11 @@ def _first_neighbour_flow(b: _Builder, result: CompletionResult) -> None:
         flow, order, arrival = inpainted_at(result.fills[0], b.view)
         b.image(ent.COMPLETION_FLOW_IMAGE, visual.flow_to_rgb(flow))
         origins, vectors = visual.sparse_arrows(flow, FLOW_ARROW_STEP_PX)
-        b.log(ent.COMPLETION_FLOW_ARROWS, rr.Arrows2D(origins=origins, vectors=vectors))
-    visited = np.where(order >= 0, order, np.nan).astype(np.float32)
-    top = float(np.nanmax(visited)) if (order >= 0).any() else 1.0
+        b.log(ent.COMPLETION_FLOW_ARROWS, Row(rr.Arrows2D, {"origins": origins, "vectors": vectors}, len(origins)))
+    unvisited = order < 0
+    visited = order.astype(np.float32)
+    visited[unvisited] = np.nan
+    top = float(order.max()) if not unvisited.all() else 1.0
     b.map(ent.COMPLETION_FMM_ORDER, visited, "viridis", (0.0, top))
     # Shown over the filled band only: T is 0 on every known pixel by definition.
     b.map(ent.COMPLETION_FMM_ARRIVAL, arrival, "magma", visual.ARRIVAL_RANGE, shown=arrival > 0)
@@ -286,7 +295,7 @@ def inpainted_at(fill: Any, view: ViewSize) -> tuple[np.ndarray, np.ndarray, np.
     pieces (nearest working pixel) as completion's full-frame view pastes them: one visiting order over all boxes,
     each pixel taking the piece that claims it last."""
     flow = np.full((view.height, view.width, 2), np.nan, np.float32)
-    order = np.full((view.height, view.width), -1, np.int64)
+    order = np.full((view.height, view.width), -1, np.int32)
     arrival = np.full((view.height, view.width), np.inf, np.float32)
     visited = 0
     boxes = []
@@ -328,8 +337,8 @@ def _box_at(piece: Any, view: ViewSize, visited: int) -> tuple[tuple[int, int], 
 
     vs, us = taps(y0, y1, rows.start, height), taps(x0, x1, cols.start, width)
     pick = lambda values: values.take(vs, axis=0).take(us, axis=1)  # noqa: E731
-    order = pick(result.order).astype(np.int64)
-    order = np.where(order >= 0, order + visited, -1)
+    order = pick(result.order).astype(np.int32)
+    order = np.where(order >= 0, order + np.int32(visited), np.int32(-1))
     return (y0, x0), (pick(result.flow) * np.float32(view.scale / piece.scale), order,
                       pick(result.arrival) / np.float32(piece.scale))
 
@@ -369,9 +378,9 @@ def _deblur_weights(b: _Builder, weights: np.ndarray) -> None:
         stored = _stored_weights(b.view.values(weights), b.spec.lossless)
         b.png(ent.DEBLUR_WEIGHTS, encoders.indexed_png(_WEIGHT_INDICES[stored], visual.map_palette("viridis")))
         data = encoders.png16(stored)  # lossless for the stored values, a tenth of the raw bytes
-        b.log(ent.map_values(ent.DEBLUR_WEIGHTS), rr.EncodedDepthImage(
-            data, media_type="image/png", meter=ent.DEBLUR_WEIGHTS_SCALE, colormap="viridis",
-            depth_range=(0.0, ent.DEBLUR_WEIGHTS_SCALE)), nbytes=len(data))
+        b.log(ent.map_values(ent.DEBLUR_WEIGHTS), Row(rr.EncodedDepthImage, {
+            "blob": data, "media_type": "image/png", "meter": ent.DEBLUR_WEIGHTS_SCALE, "colormap": "viridis",
+            "depth_range": (0.0, ent.DEBLUR_WEIGHTS_SCALE)}), nbytes=len(data))
 
 
 def _stored_weights(weights: np.ndarray, lossless: bool) -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 import rerun as rr
 
 from ffviz import entities as ent
+from ffviz.recording.columns import ColumnBuffer, Row
 from pipeline.results import Stamp
 
 # H.264 frame streams (rr.VideoStream): no B-frames (rerun takes each sample's time as its PTS), zerolatency so that
@@ -32,8 +33,9 @@ PNG_OPTIONS = [cv2.IMWRITE_PNG_COMPRESSION, 6, cv2.IMWRITE_PNG_STRATEGY, cv2.IMW
 class VideoTrack:
     """One frame stream as H.264 samples on a ``rr.VideoStream`` entity, encoded as frames arrive (PyAV)."""
 
-    def __init__(self, rec: rr.RecordingStream, entity: str, fps: float) -> None:
+    def __init__(self, rec: rr.RecordingStream, entity: str, fps: float, columns: ColumnBuffer | None = None) -> None:
         self.rec, self.entity, self.fps = rec, entity, fps
+        self.columns = columns  # where each frame's own sample is held with its other rows (None: logged at once)
         self._codec: av.CodecContext | None = None
         self._times: dict[int, float] = {}
         self.frames = 0
@@ -70,9 +72,13 @@ class VideoTrack:
             sample = np.frombuffer(bytes(packet), np.uint8)
             self.bytes += sample.size
             self.frames += 1
-            if index == current:  # the frame being recorded (always, with zerolatency): batched with its rows
-                self._times.pop(index, None)
-                self.rec.log(self.entity, rr.VideoStream.from_fields(sample=sample, is_keyframe=bool(packet.is_keyframe)))
+            if index == current:  # the frame being recorded (always, with zerolatency): sent with its rows
+                row = Row(rr.VideoStream, {"sample": sample, "is_keyframe": bool(packet.is_keyframe)})
+                seconds = self._times.pop(index, 0.0)
+                if self.columns is None:
+                    self.rec.log(self.entity, row.archetype())
+                else:
+                    self.columns.add(self.entity, row, index, seconds)
                 continue
             # A late packet: columns, so that the recording's current time (the frame being recorded) stays.
             self.rec.send_columns(self.entity, indexes=[

@@ -96,7 +96,7 @@ class VariantRecording:
         self.rec.set_time(ent.FRAME_TIMELINE, sequence=t)
         self.rec.set_time(ent.VIDEO_TIME_TIMELINE, duration=result.stamp.time_s)
         for item in view.logged:
-            self.rec.log(variant_entity(name, item.entity), item.archetype)
+            self.rec.log(variant_entity(name, item.entity), item.loggable)
         for entity, rgb in view.streams:
             self.rec.log(variant_entity(name, entity), rr.EncodedImage(contents=encoders.png(rgb),
                                                                        media_type="image/png"))
