@@ -215,8 +215,8 @@ class RerunRecorder:
         self._set_time(view.stamp)
         for item in view.logged:
             started = time.thread_time()
-            if isinstance(item.archetype, Row) and not item.times:
-                self._columns.add(item.entity, item.archetype, view.stamp.index, view.stamp.time_s)
+            if isinstance(item.archetype, Row):
+                self._columns.add(item.entity, item.archetype, view.stamp.index, view.stamp.time_s, item.times)
             else:
                 for timeline, sequence in item.times:
                     self.rec.set_time(timeline, sequence=sequence)

@@ -8,7 +8,8 @@ videos measured as they are (e.g. phone-clips.sh's portrait clips, with the fram
 run is its own child process measured from outside as `ffviz bench` measures (ffviz.bench.measure.run_measured: CPU
 seconds of the process tree, peak RSS from wait4), plain and recorded in turn, --repeat times; the table shows
 medians, and the CPU ratio's median and range over the pairs (each recorded run against the plain run just before
-it). The bounds are issue 39's: the recording adds at most 30 % CPU at 640x360 and 1080p, and at most
+it). The project's modules are byte-compiled first, as an installed package's are: where PYTHONDONTWRITEBYTECODE is
+set, each run would compile them again, the recorded run more of them. The bounds are issue 39's: the recording adds at most 30 % CPU at 640x360 and 1080p, and at most
 max(25 %, 600 MB) to the peak at every size. Writes its section of docs/benchmarks-recording.md (--no-report: print
 only).
 
@@ -19,6 +20,7 @@ Usage: python -m benchmarks.recording.recording_cost [--clip ../shared/videos/df
 
 from __future__ import annotations
 
+import compileall
 import os
 import statistics
 import sys
@@ -141,6 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     common.add_report(parser, common.RECORDING_REPORT)
     args = parser.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
+    for package in ("ffviz", "pipeline"):
+        compileall.compile_dir(str(common.ROOT / package), quiet=1)
     inputs = [(size, args.frames, args.repeat) for size in args.sizes.split(",") if size]
     inputs += [(path, None, args.repeat) for path in args.input]
     if args.long:

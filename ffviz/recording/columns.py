@@ -39,10 +39,11 @@ class Row:
 
 @dataclass
 class _Pending:
-    shape: tuple
+    shape: tuple  # the rows' (Row.shape, other timelines' names)
     kind: type
     frames: list[int] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
+    others: list[tuple[int, ...]] = field(default_factory=list)  # each row's times on the other timelines
     rows: list[Row] = field(default_factory=list)
 
 
@@ -55,15 +56,18 @@ class ColumnBuffer:
         self._spent = spent  # told each entity's CPU seconds of sending
         self._pending: dict[str, _Pending] = {}
 
-    def add(self, entity: str, row: Row, frame: int, seconds: float) -> None:
+    def add(self, entity: str, row: Row, frame: int, seconds: float, times: tuple[tuple[str, int], ...] = ()) -> None:
+        """``row`` at ``frame`` (``seconds`` of video) and at ``times`` on other (sequence) timelines."""
+        shape = (row.shape, tuple(name for name, _ in times))
         pending = self._pending.get(entity)
-        if pending is not None and pending.shape != row.shape:
+        if pending is not None and pending.shape != shape:
             self._send(entity, pending)
             pending = None
         if pending is None:
-            pending = self._pending[entity] = _Pending(row.shape, row.kind)
+            pending = self._pending[entity] = _Pending(shape, row.kind)
         pending.frames.append(frame)
         pending.seconds.append(seconds)
+        pending.others.append(tuple(sequence for _, sequence in times))
         pending.rows.append(row)
 
     def send(self) -> None:
@@ -73,15 +77,23 @@ class ColumnBuffer:
 
     def _send(self, entity: str, pending: _Pending) -> None:
         started = time.thread_time()
-        names = pending.shape[1]
-        if pending.shape[2]:  # one instance a row
-            columns = pending.kind.columns(**{name: [row.fields[name] for row in pending.rows] for name in names})
+        (_, names, one_each), timelines = pending.shape
+        if one_each:
+            columns = pending.kind.columns(**{name: _stacked([row.fields[name] for row in pending.rows])
+                                              for name in names})
         else:
             columns = pending.kind.columns(**{name: np.concatenate([row.fields[name] for row in pending.rows])
                                               for name in names}).partition([row.instances for row in pending.rows])
         self.rec.send_columns(entity, indexes=[
             rr.TimeColumn(ent.FRAME_TIMELINE, sequence=pending.frames),
-            rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=pending.seconds)], columns=columns)
+            rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=pending.seconds),
+            *(rr.TimeColumn(name, sequence=[other[k] for other in pending.others]) for k, name in enumerate(timelines))],
+            columns=columns)
         del self._pending[entity]
         if self._spent is not None:
             self._spent(entity, time.thread_time() - started)
+
+
+def _stacked(values: list) -> Any:
+    """One field's values of every row: numpy scalars as one array of their type (a packed colour stays a colour)."""
+    return np.array(values) if isinstance(values[0], np.generic) else values

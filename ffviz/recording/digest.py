@@ -426,10 +426,14 @@ def _trace(b: _Builder, stage: str, rgb: np.ndarray) -> None:
         b.log(ent.trace_label(t), _label(b.view, trace.stage_label(t, step)), times)
 
 
-def _label(view: ViewSize, text: str) -> rr.Boxes2D:
+def _label(view: ViewSize, text: str) -> Row:
     """A picture's label: a box around the whole of it, titled."""
-    return rr.Boxes2D(array=[0, 0, view.width, view.height], array_format=rr.Box2DFormat.XYWH,
-                      colors=[legends.LABEL_COLOUR], labels=[text], show_labels=True)
+    half = (view.width / 2, view.height / 2)
+    return Row(rr.Boxes2D, {"centers": half, "half_sizes": half, "colors": _LABEL_RGBA, "labels": text,
+                            "show_labels": True})
+
+
+_LABEL_RGBA = np.uint32(int.from_bytes(bytes(legends.LABEL_COLOUR), "big"))  # packed 0xRRGGBBAA: a row's one colour
 
 
 def _trace_completion(b: _Builder, result: CompletionResult) -> None:
