@@ -1007,3 +1007,23 @@ def test_rows_sent_as_columns_read_back_as_the_same_log_calls_would(tmp_path):
         return sorted(rows)
     assert arrows(held) == arrows(logged)
     assert [len(v) for _, v in arrows(held)] == [t % 4 for t in range(7)]
+
+
+def test_the_masks_and_maps_pngs_decode_to_their_values_anywhere():
+    """encoders.grey_png (zlib-ng's deflate): 8- and 16-bit grey and paletted PNGs of odd sizes, sparse and full,
+    read back exactly by OpenCV's decoder (the viewer's stand-in here) and by ffviz.rrd, alphas included."""
+    import cv2
+    from ffviz.recording import encoders
+    from ffviz.rrd import _paletted_png
+    rng = np.random.default_rng(5)
+    palette = rng.integers(0, 256, (256, 4)).astype(np.uint8)
+    for height, width, share in ((1, 1, 1.0), (7, 13, 0.3), (361, 641, 0.05), (90, 1, 1.0), (2, 500, 0.0)):
+        values = (rng.integers(0, 65536, (height, width)) * (rng.random((height, width)) < share)).astype(np.uint16)
+        decoded = cv2.imdecode(np.frombuffer(encoders.png16(values), np.uint8), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(decoded.reshape(height, width), values)
+        classes = (values % 256).astype(np.uint8)
+        indices, colours = _paletted_png(encoders.indexed_png(classes, palette))
+        np.testing.assert_array_equal(indices, classes)
+        np.testing.assert_array_equal(colours[classes], palette[classes])
+        rgba = cv2.imdecode(np.frombuffer(encoders.indexed_png(classes, palette), np.uint8), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(rgba.reshape(height, width, 4)[..., [2, 1, 0, 3]], palette[classes])

@@ -1,5 +1,10 @@
 """How a recording stores pictures: frame streams as H.264 samples, class maps as paletted PNG, float maps' values
-as 16-bit PNG, sparse pictures as JPEG. Pure encoding; the recorder decides what goes where."""
+as 16-bit PNG, sparse pictures as JPEG. Pure encoding; the recorder decides what goes where.
+
+Masks and maps are single-channel PNGs written here (``grey_png``): rows unfiltered, deflated with zlib's run-length
+strategy by zlib-ng, which does it in a third of zlib's time for the same bytes. Their pictures are runs of a few
+values (most pixels have none): a filter buys ~10 % of the bytes for twice the time (docs/benchmarks-recording.md).
+"""
 
 from __future__ import annotations
 
@@ -13,6 +18,7 @@ import av
 import cv2
 import numpy as np
 import rerun as rr
+from zlib_ng import zlib_ng
 
 from ffviz import entities as ent
 from ffviz.recording.columns import ColumnBuffer, Row
@@ -24,10 +30,8 @@ from pipeline.results import Stamp
 H264_OPTIONS = {"preset": "ultrafast", "tune": "zerolatency", "crf": "20", "bf": "0", "threads": "1"}
 KEYFRAME_INTERVAL = 30
 FRAME_SIZE_FIELD = "frame_size"  # (width, height) of a frame stream whose size is odd (ffviz.rrd crops to it)
-# Masks and maps as PNG: rows unfiltered and zlib's run-length strategy. Their pictures are runs of a few values
-# (most pixels have none): a filter buys ~10 % of the bytes for twice the time (docs/benchmarks-recording.md).
-PNG_OPTIONS = [cv2.IMWRITE_PNG_COMPRESSION, 6, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
-               cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+PNG_GREY, PNG_PALETTED = 0, 3  # IHDR colour types
 
 
 class VideoTrack:
@@ -113,22 +117,26 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
-def indexed_png(indices: np.ndarray, palette: np.ndarray) -> bytes:
-    """An 8-bit paletted PNG: ``indices`` (uint8) into ``palette`` ((256, 4) RGBA; alpha in a tRNS chunk).
+def grey_png(pixels: np.ndarray, colour_type: int = PNG_GREY, chunks: bytes = b"") -> bytes:
+    """A single-channel PNG of ``pixels`` (uint8 or uint16), with ``chunks`` (e.g. PLTE) before its data."""
+    height, width = pixels.shape
+    size = pixels.dtype.itemsize
+    rows = np.zeros((height, 1 + width * size), np.uint8)  # each row: filter type 0 (none), then its samples
+    rows[:, 1:] = np.ascontiguousarray(pixels, pixels.dtype.newbyteorder(">")).view(np.uint8).reshape(height, -1)
+    deflate = zlib_ng.compressobj(6, zlib_ng.DEFLATED, 15, 9, zlib_ng.Z_RLE)
+    data = deflate.compress(rows) + deflate.flush()
+    header = struct.pack(">IIBBBBB", width, height, 8 * size, colour_type, 0, 0, 0)
+    return (PNG_SIGNATURE + _png_chunk(b"IHDR", header) + chunks + _png_chunk(b"IDAT", data)
+            + _png_chunk(b"IEND", b""))
 
-    OpenCV writes no paletted PNG, but the image data of an 8-bit grey PNG is laid out as a paletted one's:
-    its grey encoding (a twentieth of an RGBA PNG's time, fewer bytes) is relabelled (IHDR colour type 3)
-    and given the palette. The viewer honours the alphas when the image's opacity is below 1 (SEE_THROUGH);
-    ffviz.rrd reads the indices back."""
-    ok, data = cv2.imencode(".png", np.ascontiguousarray(indices, np.uint8), PNG_OPTIONS)
-    if not ok:
-        raise RuntimeError("PNG encoding failed")
-    data = data.tobytes()
-    header = bytearray(data[16:29])  # IHDR: width, height, bit depth 8, colour type 0 (grey), ...
-    header[9] = 3  # paletted
+
+def indexed_png(indices: np.ndarray, palette: np.ndarray) -> bytes:
+    """An 8-bit paletted PNG: ``indices`` (uint8) into ``palette`` ((256, 4) RGBA; alpha in a tRNS chunk). The
+    viewer honours the alphas when the image's opacity is below 1 (SEE_THROUGH); ffviz.rrd reads the indices back."""
+    indices = np.asarray(indices, np.uint8)
     used = int(np.max(indices, initial=0)) + 1  # PLTE and tRNS need no entries past the highest index
-    return (data[:8] + _png_chunk(b"IHDR", bytes(header)) + _png_chunk(b"PLTE", palette[:used, :3].tobytes())
-            + _png_chunk(b"tRNS", palette[:used, 3].tobytes()) + data[33:])
+    return grey_png(indices, PNG_PALETTED, _png_chunk(b"PLTE", palette[:used, :3].tobytes())
+                    + _png_chunk(b"tRNS", palette[:used, 3].tobytes()))
 
 
 @functools.lru_cache(maxsize=32)
@@ -150,7 +158,4 @@ def palette_png(classes: np.ndarray, legend: Sequence[tuple]) -> bytes:
 
 def png16(stored: np.ndarray) -> bytes:
     """A grey PNG of ``stored`` (8 or 16 bits)."""
-    ok, data = cv2.imencode(".png", stored, PNG_OPTIONS)
-    if not ok:
-        raise RuntimeError("PNG encoding failed")
-    return data.tobytes()
+    return grey_png(stored)
