@@ -299,7 +299,7 @@ class RerunRecorder:
         self._on_foreground(estimate)
         self._on_camera_choice(stamp, estimate)
         self._on_ignored(estimate.ignored)
-        self.cpu_by_family[ent.MOTION_PARAMS.split("/")[0]] += time.thread_time() - started
+        self.cpu_by_family[digest.MOTION_FAMILY] += time.thread_time() - started
         self._flush_when_due()  # its sending counted under each entity's family
 
     def _scalar(self, stamp: Stamp, entity: str, value: float) -> None:

@@ -89,8 +89,13 @@ class FrameView:
 
 
 def family(entity: str) -> str:
-    """The entity family a cost is counted under: a traced frame's pictures as 'trace', else the first two parts."""
-    return ent.TRACE if entity.startswith(ent.TRACE + "/") else "/".join(entity.split("/")[:2])
+    """The entity family a cost is counted under: a traced frame's pictures as 'trace', pass 1's entities as
+    'motion', else the first two parts."""
+    root = entity.split("/")[0]
+    return root if root in (ent.TRACE, MOTION_FAMILY) else "/".join(entity.split("/")[:2])
+
+
+MOTION_FAMILY = ent.MOTION_PARAMS.split("/")[0]
 
 
 class _Builder:
