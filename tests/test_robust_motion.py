@@ -50,6 +50,20 @@ def test_a_figure_covering_sixty_percent_shakes_the_view_no_more_than_a_small_on
         assert large_shakes[mode].px <= 1.5 * small_shakes[mode].px, mode
 
 
+@pytest.mark.parametrize("image, seed", [("coffee", 0), ("chelsea", 1)])
+def test_a_half_frame_figure_with_blurred_frames_shakes_the_view_no_more_than_a_small_one(image, seed):
+    """A figure covering half the frame, every third frame motion-blurred: a pair between a blurred and a sharp frame
+    is also tracked at one sharpness (motion._with_matched_sharpness), or its few background corners drift and
+    neither of its motions is the camera's (one pair 16 px off on the first, several on the second)."""
+    large = foreground.clip("half, blurred", image, seed)
+    small = foreground.clip("small, blurred", image, seed)
+    large_shakes = foreground.residual_shakes(large, ("full", "crop"))
+    small_shakes = foreground.residual_shakes(small, ("full", "crop"))
+    assert large_shakes["full"].figure_share > 0.45
+    for mode in ("full", "crop"):
+        assert large_shakes[mode].px <= 1.5 * small_shakes[mode].px, mode
+
+
 def test_three_figures_walking_their_own_ways_do_not_pull_the_camera():
     """Three figures (the union 61 % of the frame): the background is one of three motions of each pair."""
     video = foreground.clip("three figures", "coffee", 1)

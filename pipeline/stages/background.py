@@ -40,7 +40,7 @@ EXPLAINED = 6.0  # grey levels: a pixel this close to what one motion brings, an
 EXPLAINED_MARGIN = 4.0  # ... this much closer than every other motion brings, moves with that motion
 SHARPNESS_RATIO = 1.3  # a frame whose gradient energy exceeds the blurriest's by more is blurred to match (a blurred
 # frame leaves every edge unexplained by a sharp one's) ...
-MATCH_SIGMAS = (0.5, 0.75, 1.0, 1.4, 2.0, 2.8, 4.0)  # ... by the least of these Gaussians (px at ANALYSIS_SIDE) that
+MATCH_SIGMAS = (0.5, 0.75, 1.0, 1.4, 2.0, 2.8, 4.0)  # ... by the least of these Gaussians (px at the size compared) that
 # brings it within the ratio; where none does, the test is skipped
 VOTE_FLOOR = 10.0  # occlusion votes (px at ANALYSIS_SIDE) a motion's lead must exceed to count: noise below
 VOTE_SCALE = 40.0  # votes beyond the floor for one unit of log-odds ...
@@ -372,18 +372,18 @@ def _analysis_frames(grays: Sequence[np.ndarray]) -> list[np.ndarray] | None:
     factor = min(1.0, ANALYSIS_SIDE / max(grays[1].shape))
     frames = [cv2.resize(g, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA).astype(np.float32)
               if factor < 1.0 else g.astype(np.float32) for g in grays]
-    energy = [_gradient_energy(f) for f in frames]
+    energy = [gradient_energy(f) for f in frames]
     target = SHARPNESS_RATIO * max(min(energy), 1e-6)
-    matched = [frame if sharpness <= target else _blurred_to(frame, target) for frame, sharpness in zip(frames, energy)]
+    matched = [frame if sharpness <= target else blurred_to(frame, target) for frame, sharpness in zip(frames, energy)]
     return None if any(frame is None for frame in matched) else matched
 
 
-def _blurred_to(frame: np.ndarray, energy: float) -> np.ndarray | None:
+def blurred_to(frame: np.ndarray, energy: float) -> np.ndarray | None:
     """``frame`` blurred by the least of MATCH_SIGMAS that brings its gradient energy down to ``energy``; None if
     none does."""
     for sigma in MATCH_SIGMAS:
         blurred = cv2.GaussianBlur(frame, (0, 0), sigma)
-        if _gradient_energy(blurred) <= energy:
+        if gradient_energy(blurred) <= energy:
             return blurred
     return None
 
@@ -422,7 +422,7 @@ def _residual(frame: np.ndarray, other: np.ndarray, other_from_frame: np.ndarray
     return outside, valid
 
 
-def _gradient_energy(image: np.ndarray) -> float:
+def gradient_energy(image: np.ndarray) -> float:
     return float(np.mean(cv2.Sobel(image, cv2.CV_32F, 1, 0) ** 2 + cv2.Sobel(image, cv2.CV_32F, 0, 1) ** 2))
 
 

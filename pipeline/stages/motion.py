@@ -23,7 +23,7 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
-from pipeline.stages.background import CameraChoice
+from pipeline.stages.background import SHARPNESS_RATIO, CameraChoice, blurred_to, gradient_energy
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
@@ -155,6 +155,7 @@ class PreparedFrame:
     width: int
     height: int
     ignore: np.ndarray | None = None  # bool, working size: features here are not used (IgnoreRegion, --ignore-mask)
+    sharpness: float = 0.0  # mean squared gradient of gray (0: unknown, never matched)
 
 
 def prepare(rgb: np.ndarray, config: MotionConfig, ignore: np.ndarray | None = None) -> PreparedFrame:
@@ -171,7 +172,8 @@ def prepare(rgb: np.ndarray, config: MotionConfig, ignore: np.ndarray | None = N
     if ignore is not None:
         ignore = ignore if scale == 1.0 else cv2.resize(ignore.view(np.uint8), (gray.shape[1], gray.shape[0]),
                                                            interpolation=cv2.INTER_NEAREST).view(bool)
-    return PreparedFrame(gray=gray, hist=hist, scale=scale, width=width, height=height, ignore=ignore)
+    return PreparedFrame(gray=gray, hist=hist, scale=scale, width=width, height=height, ignore=ignore,
+                         sharpness=gradient_energy(gray))
 
 
 def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> MotionEstimate:
@@ -182,7 +184,7 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
     """
     cv2.setRNGSeed(RANSAC_SEED)
     hist_distance = float(cv2.compareHist(prev.hist, curr.hist, cv2.HISTCMP_BHATTACHARYYA))
-    work = _track_and_fit(prev.gray, curr.gray, config, prev.ignore)
+    work = _with_matched_sharpness(_track_and_fit(prev.gray, curr.gray, config, prev.ignore), prev, curr, config)
     if config.refine == "ecc":
         work = _refine_ecc(prev.gray, curr.gray, work, config)
 
@@ -214,6 +216,46 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
         curr_from_prev=geometry.IDENTITY.copy(), status="fallback",
         warning=f"motion fallback to identity: {failure}", **tracks,
     )
+
+
+def _with_matched_sharpness(work: _WorkEstimate, prev: PreparedFrame, curr: PreparedFrame,
+                            config: MotionConfig) -> _WorkEstimate:
+    """Where one frame of the pair is much blurrier (gradient energy beyond background.SHARPNESS_RATIO), the pair is
+    tracked again with the sharper frame blurred to match, and that fit's motion joins the others (or stands in
+    where the first fit failed): LK between a motion-blurred frame and a sharp one drifts, most where a large figure
+    leaves few background corners, and the camera's motion can then be missing from the first fit's. The chooser
+    (background.py) decides among them as among the others; the first fit stays RANSAC's winner."""
+    matched = _at_one_sharpness(prev, curr)
+    if matched is None:
+        return work
+    again = _track_and_fit(*matched, config, prev.ignore)
+    if again.failure is not None:
+        return work
+    if work.failure is not None:
+        return again
+    known = [work.curr_from_prev] + [matrix for matrix, _, _ in work.others]
+    if any(corner_shift(again.curr_from_prev, matrix, work.prev_points) < ALTERNATIVE_MIN_SHIFT_PX for matrix in known):
+        return work
+    others = work.others
+    if len(others) >= MAX_OTHER_MOTIONS:  # room for it: the others with the most tracks stay
+        others = sorted(others, key=lambda other: -len(other[1]))[:MAX_OTHER_MOTIONS - 1]
+    inliers = again.inliers
+    work.others = others + [(again.curr_from_prev, again.prev_points[inliers], again.curr_points[inliers])]
+    return work
+
+
+def _at_one_sharpness(prev: PreparedFrame, curr: PreparedFrame) -> tuple[np.ndarray, np.ndarray] | None:
+    """The pair's grey images with the sharper blurred to the other's sharpness (within SHARPNESS_RATIO of its
+    gradient energy); None where the two are that close already, or cannot be matched."""
+    if min(prev.sharpness, curr.sharpness) <= 0:
+        return None
+    if prev.sharpness > SHARPNESS_RATIO * curr.sharpness:
+        blurred = blurred_to(prev.gray, SHARPNESS_RATIO * curr.sharpness)
+        return None if blurred is None else (blurred, curr.gray)
+    if curr.sharpness > SHARPNESS_RATIO * prev.sharpness:
+        blurred = blurred_to(curr.gray, SHARPNESS_RATIO * prev.sharpness)
+        return None if blurred is None else (prev.gray, blurred)
+    return None
 
 
 # A refining pass tracks against curr brought back by an estimate: what LK sees is only the residual motion (a pixel or
