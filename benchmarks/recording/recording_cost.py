@@ -9,8 +9,8 @@ run is its own child process measured from outside as `ffviz bench` measures (ff
 seconds of the process tree, peak RSS from wait4), plain and recorded in turn, --repeat times; the table shows
 medians, and the CPU ratio's median and range over the pairs (each recorded run against the plain run just before
 it). The project's modules are byte-compiled first, as an installed package's are: where PYTHONDONTWRITEBYTECODE is
-set, each run would compile them again, the recorded run more of them. The bounds are issue 39's: the recording adds at most 30 % CPU at 640x360 and 1080p, and at most
-max(25 %, 600 MB) to the peak at every size. Writes its section of docs/benchmarks-recording.md (--no-report: print
+set, each run would compile them again, the recorded run more of them. The bounds are issue 39's: the recording
+adds at most 30 % CPU at 640x360 and 1080p, and at most max(25 %, 600 MB) to the peak at every size. Writes its section of docs/benchmarks-recording.md (--no-report: print
 only).
 
 Usage: python -m benchmarks.recording.recording_cost [--clip ../shared/videos/dfkimera_shaky.mp4] [--frames 120]

@@ -40,7 +40,6 @@ class Row:
 @dataclass
 class _Pending:
     shape: tuple  # the rows' (Row.shape, other timelines' names)
-    kind: type
     frames: list[int] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
     others: list[tuple[int, ...]] = field(default_factory=list)  # each row's times on the other timelines
@@ -64,7 +63,7 @@ class ColumnBuffer:
             self._send(entity, pending)
             pending = None
         if pending is None:
-            pending = self._pending[entity] = _Pending(shape, row.kind)
+            pending = self._pending[entity] = _Pending(shape)
         pending.frames.append(frame)
         pending.seconds.append(seconds)
         pending.others.append(tuple(sequence for _, sequence in times))
@@ -77,12 +76,12 @@ class ColumnBuffer:
 
     def _send(self, entity: str, pending: _Pending) -> None:
         started = time.thread_time()
-        (_, names, one_each), timelines = pending.shape
+        (kind, names, one_each), timelines = pending.shape
         if one_each:
-            columns = pending.kind.columns(**{name: _stacked([row.fields[name] for row in pending.rows])
+            columns = kind.columns(**{name: _stacked([row.fields[name] for row in pending.rows])
                                               for name in names})
         else:
-            columns = pending.kind.columns(**{name: np.concatenate([row.fields[name] for row in pending.rows])
+            columns = kind.columns(**{name: np.concatenate([row.fields[name] for row in pending.rows])
                                               for name in names}).partition([row.instances for row in pending.rows])
         self.rec.send_columns(entity, indexes=[
             rr.TimeColumn(ent.FRAME_TIMELINE, sequence=pending.frames),

@@ -20,7 +20,6 @@ import numpy as np
 import rerun as rr
 from zlib_ng import zlib_ng
 
-from ffviz import entities as ent
 from ffviz.recording.columns import ColumnBuffer, Row
 from pipeline.results import Stamp
 
@@ -37,9 +36,9 @@ PNG_GREY, PNG_PALETTED = 0, 3  # IHDR colour types
 class VideoTrack:
     """One frame stream as H.264 samples on a ``rr.VideoStream`` entity, encoded as frames arrive (PyAV)."""
 
-    def __init__(self, rec: rr.RecordingStream, entity: str, fps: float, columns: ColumnBuffer | None = None) -> None:
+    def __init__(self, rec: rr.RecordingStream, entity: str, fps: float, columns: ColumnBuffer) -> None:
         self.rec, self.entity, self.fps = rec, entity, fps
-        self.columns = columns  # where each frame's own sample is held with its other rows (None: logged at once)
+        self.columns = columns  # where the samples are held with the recording's other rows
         self._codec: av.CodecContext | None = None
         self._times: dict[int, float] = {}
         self.frames = 0
@@ -68,27 +67,18 @@ class VideoTrack:
                                            format="yuv420p")
         frame.pts = stamp.index
         self._times[stamp.index] = stamp.time_s
-        self._send(self._codec.encode(frame), current=stamp.index)
+        self._send(self._codec.encode(frame))
 
-    def _send(self, packets: Sequence[av.Packet], current: int | None = None) -> None:
+    def _send(self, packets: Sequence[av.Packet]) -> None:
+        """Each packet's sample into the column buffer at its own frame's time (with zerolatency, the frame being
+        recorded; a late one keeps its own time, not the recording's current one)."""
         for packet in packets:
             index = int(packet.pts)
             sample = np.frombuffer(bytes(packet), np.uint8)
             self.bytes += sample.size
             self.frames += 1
-            if index == current:  # the frame being recorded (always, with zerolatency): sent with its rows
-                row = Row(rr.VideoStream, {"sample": sample, "is_keyframe": bool(packet.is_keyframe)})
-                seconds = self._times.pop(index, 0.0)
-                if self.columns is None:
-                    self.rec.log(self.entity, row.archetype())
-                else:
-                    self.columns.add(self.entity, row, index, seconds)
-                continue
-            # A late packet: columns, so that the recording's current time (the frame being recorded) stays.
-            self.rec.send_columns(self.entity, indexes=[
-                rr.TimeColumn(ent.FRAME_TIMELINE, sequence=[index]),
-                rr.TimeColumn(ent.VIDEO_TIME_TIMELINE, duration=[self._times.pop(index, 0.0)])],
-                columns=rr.VideoStream.columns(sample=[sample], is_keyframe=[bool(packet.is_keyframe)]))
+            row = Row(rr.VideoStream, {"sample": sample, "is_keyframe": bool(packet.is_keyframe)})
+            self.columns.add(self.entity, row, index, self._times.pop(index, 0.0))
 
     def close(self) -> None:
         if self._codec is not None:

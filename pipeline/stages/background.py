@@ -372,7 +372,12 @@ def _analysis_frames(grays: Sequence[np.ndarray]) -> list[np.ndarray] | None:
     factor = min(1.0, ANALYSIS_SIDE / max(grays[1].shape))
     frames = [cv2.resize(g, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA).astype(np.float32)
               if factor < 1.0 else g.astype(np.float32) for g in grays]
-    energy = [gradient_energy(f) for f in frames]
+    return at_one_sharpness(frames, [gradient_energy(f) for f in frames])
+
+
+def at_one_sharpness(frames: Sequence[np.ndarray], energy: Sequence[float]) -> list[np.ndarray] | None:
+    """``frames`` (of gradient energies ``energy``) with the sharper ones blurred to the blurriest's sharpness
+    (within SHARPNESS_RATIO of its energy); None where a frame cannot be matched."""
     target = SHARPNESS_RATIO * max(min(energy), 1e-6)
     matched = [frame if sharpness <= target else blurred_to(frame, target) for frame, sharpness in zip(frames, energy)]
     return None if any(frame is None for frame in matched) else matched

@@ -23,7 +23,7 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
-from pipeline.stages.background import SHARPNESS_RATIO, CameraChoice, blurred_to, gradient_energy
+from pipeline.stages.background import SHARPNESS_RATIO, CameraChoice, at_one_sharpness, gradient_energy
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
@@ -245,17 +245,13 @@ def _with_matched_sharpness(work: _WorkEstimate, prev: PreparedFrame, curr: Prep
 
 
 def _at_one_sharpness(prev: PreparedFrame, curr: PreparedFrame) -> tuple[np.ndarray, np.ndarray] | None:
-    """The pair's grey images with the sharper blurred to the other's sharpness (within SHARPNESS_RATIO of its
-    gradient energy); None where the two are that close already, or cannot be matched."""
-    if min(prev.sharpness, curr.sharpness) <= 0:
+    """The pair's grey images with the sharper blurred to the other's sharpness (background.at_one_sharpness);
+    None where the two are within SHARPNESS_RATIO already, or cannot be matched."""
+    energy = (prev.sharpness, curr.sharpness)
+    if min(energy) <= 0 or max(energy) <= SHARPNESS_RATIO * min(energy):
         return None
-    if prev.sharpness > SHARPNESS_RATIO * curr.sharpness:
-        blurred = blurred_to(prev.gray, SHARPNESS_RATIO * curr.sharpness)
-        return None if blurred is None else (blurred, curr.gray)
-    if curr.sharpness > SHARPNESS_RATIO * prev.sharpness:
-        blurred = blurred_to(curr.gray, SHARPNESS_RATIO * prev.sharpness)
-        return None if blurred is None else (prev.gray, blurred)
-    return None
+    matched = at_one_sharpness((prev.gray, curr.gray), energy)
+    return None if matched is None else (matched[0], matched[1])
 
 
 # A refining pass tracks against curr brought back by an estimate: what LK sees is only the residual motion (a pixel or
