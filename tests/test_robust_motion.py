@@ -50,11 +50,13 @@ def test_a_figure_covering_sixty_percent_shakes_the_view_no_more_than_a_small_on
         assert large_shakes[mode].px <= 1.5 * small_shakes[mode].px, mode
 
 
-@pytest.mark.parametrize("image, seed", [("coffee", 0), ("chelsea", 1)])
+@pytest.mark.parametrize("image, seed", [("coffee", 0), ("chelsea", 1), ("coffee", 9), ("rocket", 1)])
 def test_a_half_frame_figure_with_blurred_frames_shakes_the_view_no_more_than_a_small_one(image, seed):
     """A figure covering half the frame, every third frame motion-blurred: a pair between a blurred and a sharp frame
-    is also tracked at one sharpness (motion._with_matched_sharpness), or its few background corners drift and
-    neither of its motions is the camera's (one pair 16 px off on the first, several on the second)."""
+    is also tracked at one sharpness (motion._with_matched_sharpness), from the sharper frame's corners too, or its
+    few background corners drift and neither of its motions is the camera's (one pair 16 px off on the first,
+    several on the second; on the third, a pair from a blurred frame 12 px off with prev's corners alone; on the
+    fourth, a sky, a few of whose corners a similarity fitted among the outliers joined to a figure's)."""
     large = foreground.clip("half, blurred", image, seed)
     small = foreground.clip("small, blurred", image, seed)
     large_shakes = foreground.residual_shakes(large, ("full", "crop"))
@@ -94,6 +96,42 @@ def test_one_layer_is_fitted_where_an_affine_could_explain_two():
     assert min(geometry.corner_error(fitted, t, 640, 360) for t in truths) < 0.1
     held = mask.ravel().astype(bool)
     assert held[:120].all() != held[120:].all()  # all of one cluster, none of the other
+
+
+def test_another_layer_is_one_group_of_tracks_not_two_far_apart():
+    """Among RANSAC's outliers, a figure's tracks low on the left and the background's few corners high on the right
+    (a sky between them): a similarity joins the two groups (its zoom and turn make up their different steps) and
+    is neither's motion; the layer beside the first fit is one group, moving by one step on top of it."""
+    rng = np.random.default_rng(5)
+    figure = rng.uniform([130, 200], [175, 300], (18, 2))
+    sky = rng.uniform([505, 15], [570, 75], (8, 2))
+    prev = np.concatenate([figure, sky]).astype(np.float32)
+    figure_motion, camera = shift(-14.0, 2.0), shift(-4.0, 0.75)
+    curr = np.concatenate([geometry.apply(figure_motion, figure), geometry.apply(camera, sky)]).astype(np.float32)
+    cv2.setRNGSeed(0)
+    joined, mask = motion._fit_model(prev, curr, motion.MotionConfig())
+    assert mask.all() and min(geometry.corner_error(geometry.to_3x3(joined), t, 640, 360)
+                              for t in (figure_motion, camera)) > 5.0
+    for model in motion.MOTION_MODELS:
+        beside, mask = motion._fit_beside(prev, curr, shift(6.0, -2.0), motion.MotionConfig(model=model))
+        assert geometry.corner_error(geometry.to_3x3(beside), figure_motion, 640, 360) < 0.1, model
+        assert mask.ravel().tolist() == [1] * 18 + [0] * 8, model
+
+
+def test_a_fit_turned_round_is_the_fit_of_the_pair_the_other_way():
+    """Tracked from curr's corners back to prev, every motion and track of the fit turned round is curr_from_prev's."""
+    rng = np.random.default_rng(1)
+    prev_pts = rng.uniform(0, 300, (40, 2)).astype(np.float32)
+    camera = np.array([[1.01, -0.02, 5.0], [0.02, 1.01, -3.0], [0.0, 0.0, 1.0]])
+    figure = shift(12.0, 1.0)
+    curr_pts = geometry.apply(camera, prev_pts).astype(np.float32)
+    back = motion._WorkEstimate(np.linalg.inv(camera), None, 40, 40, 0.0, curr_pts, prev_pts, np.ones(40, bool))
+    back.others = [(np.linalg.inv(figure), geometry.apply(figure, prev_pts[:8]), prev_pts[:8])]
+    turned = motion._reversed(back)
+    assert np.allclose(turned.curr_from_prev, camera) and np.allclose(turned.others[0][0], figure)
+    assert np.allclose(geometry.apply(turned.curr_from_prev, turned.prev_points), turned.curr_points, atol=1e-3)
+    matrix, starts, ends = turned.others[0]
+    assert np.allclose(geometry.apply(matrix, starts), ends, atol=1e-3)
 
 
 def test_occlusion_votes_put_the_moving_square_in_front(tmp_path):
@@ -167,6 +205,30 @@ def test_links_do_not_favour_the_layer_with_more_tracks():
     for t in (30, 60, 90):
         seen_at(pairs, t, (0, 50))
     assert {c.taken for c in background.decide(pairs)[1:]} == {1}
+
+
+def test_figures_that_split_leave_the_background_linked_surely():
+    """One figure's tracks go on as two motions (its two halves moved apart), the background's as one: the figure's
+    link is in doubt, the background's is not, and leaving the background costs as much as with no split."""
+    links = np.array([[68.0, 62.0, 0.0], [1.0, 0.0, 19.0], [5.0, 1.0, 1.0]])
+    scores = background.PairLayers((I3, I3, I3), links, (0, 0, 0), (0, 0, 0)).link_scores(2)
+    assert scores[1, 2] == 0.0 and scores[1, :2].max() < -0.9 * background.LINK_GAIN
+    assert scores[0, 0] == 0.0 and scores[0, 1] > -1.0  # which half is the figure: in doubt
+
+
+def test_a_layer_that_links_less_surely_is_not_left_for_one_that_links_surely():
+    """Where a third motion takes some of the background's tracks on a few pairs, the background links less surely
+    than the figure there: staying on either layer scores the same, so the chain keeps the layer its evidence (here
+    the prior for the motion most tracks follow) chose, before and after."""
+    pairs = chain(80)
+    three = np.array([[28.0, 0.0, 2.0], [0.0, 9.0, 0.0], [6.0, 2.0, 5.0]])
+    back = np.array([[54.0, 0.0], [0.0, 12.0], [5.0, 0.0], [18.0, 0.0]])
+    for t in (26, 28, 30, 32):
+        pairs[t] = background.PairLayers((I3, I3, I3), three, (0, 0, 0), (0, 0, 0))
+        pairs[t + 1] = background.PairLayers((I3, I3), back, (0, 0), (0, 0))
+    pairs[42] = background.PairLayers((I3,))
+    pairs[43] = background.PairLayers((I3, I3), None, (0, 0), (0, 0))
+    assert {c.taken for c in background.decide(pairs)[1:]} == {0}
 
 
 def test_a_run_of_misleading_pairs_is_outvoted_by_the_linked_ones():

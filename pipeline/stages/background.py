@@ -19,8 +19,8 @@ programming (Viterbi) with a bounded look-ahead: pairs are decided `LAG_PAIRS` a
 after it are known, with the pair before them fixed as decided. So a pair with no evidence of its own follows the
 pairs linked to it, a run of pairs with misleading evidence is outvoted by the linked pairs around it, and memory
 does not grow with the clip. Where there is no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear
-occlusion is worth up to 3 (half to each pair around the frame it is seen at), a sure link 10, a jump of the camera's
-motion by a fifth of the frame up to 8.
+occlusion is worth up to 3 (half to each pair around the frame it is seen at), leaving a layer a sure link follows 20,
+a jump of the camera's motion by a fifth of the frame up to 8.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ SHAKE_PAIRS = 300  # the camera's last changes of motion the scale is taken from
 CONTINUITY_FREE = 2.0  # shakes: a change of the camera's motion within this many costs nothing
 CONTINUITY_CAP = 8.0  # log-odds: the most a change of motion between pairs costs
 WINNER_PRIOR = 1.5  # log-odds for the motion most tracks follow, once a chain of linked pairs
-LINK_GAIN = 10.0  # log-odds for a link whose tracks all start where one motion of the pair before ended
+LINK_GAIN = 20.0  # log-odds against leaving a layer whose tracks all start where one motion of the pair before ended
 LINK_RADIUS = 0.02  # of the frame's long side: a track start farther from every end of the pair before is not linked
 SAME_LAYER = 0.8  # sameness (0..1) above which the occlusion test takes two motions of consecutive pairs for one layer
 LINK_TRACKS = 8  # a link rests on the tracks that are linked; fewer than this count for what they are
@@ -119,20 +119,23 @@ class PairLayers:
         return scores
 
     def _link_scores(self) -> np.ndarray:
-        """(n_before, n): the score of each pair of states (motion i of the pair before, motion j of this pair the
-        camera's) from the links: +w where i and j are one layer by the best matching of the two pairs' motions,
-        -w where either is that one layer with another, 0 where neither is linked (``_matching``). One w for the
-        pair (LINK_GAIN times the links' confidence and the matching's margin over the next best): every one-to-one
-        pairing scores alike, whichever layer holds more tracks or links less cleanly, so the links carry which
-        layer is which and the evidence alone says which layer is the camera's."""
-        matched, margin = _matching(_sameness(self.links))
-        weight = LINK_GAIN * _link_confidence(self.links) * min(margin, 1.0)
+        """(n_before, n): the score of each pair of states (motion i of the pair before the camera's, motion j of
+        this pair) from the links: 0 where i and j are one layer by the best matching of the two pairs' motions, -w
+        where either is that one layer and the other is not, 0 where neither is linked (``_matching``). Each
+        matched layer's w is LINK_GAIN times the links' confidence and that match's margin (what it adds over the
+        surest matching without it): two figures that split or merge leave their own match in doubt, not the
+        background's. Staying on a layer scores 0 whichever layer it is, however many tracks hold it or however
+        cleanly it links, so the links carry which layer is which and the evidence alone says which layer is the
+        camera's."""
+        gain = LINK_GAIN * _link_confidence(self.links)
         scores = np.zeros((self.links.shape[0] - 1, len(self.motions)))
-        for i, j in matched:
-            scores[i, :] = -weight
-            scores[:, j] = -weight
-        for i, j in matched:
-            scores[i, j] = weight
+        matched = _matching(_sameness(self.links))
+        for i, j, margin in matched:
+            leaving = -gain * min(margin, 1.0)
+            scores[i, :] = np.minimum(scores[i, :], leaving)
+            scores[:, j] = np.minimum(scores[:, j], leaving)
+        for i, j, _ in matched:
+            scores[i, j] = 0.0
         return scores
 
 
@@ -333,17 +336,22 @@ def _sameness(links: np.ndarray) -> np.ndarray:
     return np.where((into > 0) & (out_of > 0), sameness, 0.5)
 
 
-def _matching(sameness: np.ndarray) -> tuple[list[tuple[int, int]], float]:
+def _matching(sameness: np.ndarray) -> list[tuple[int, int, float]]:
     """The one-to-one matching of the motions before (rows) and now (columns) that is surest (the largest sum of
-    sameness - 0.5), as its pairs that are more likely one layer than not, and its margin over the next best."""
+    sameness - 0.5 over its pairs more likely one layer than not), as those pairs, each with its margin: what the
+    pair adds over the surest matching without it, 1 for a sure match (sameness 1) that has no rival."""
     rows, cols = sameness.shape
-    values = []
-    for chosen in itertools.permutations(range(max(rows, cols)), min(rows, cols)):
-        pairs = list(zip(range(rows), chosen)) if rows <= cols else list(zip(chosen, range(cols)))
-        values.append((sum(sameness[i, j] - 0.5 for i, j in pairs), pairs))
-    values.sort(key=lambda v: -v[0])
-    margin = values[0][0] - values[1][0] if len(values) > 1 else values[0][0]
-    return [(i, j) for i, j in values[0][1] if sameness[i, j] > 0.5], float(margin)
+    gain = np.maximum(sameness - 0.5, 0.0)
+    matchings = [list(zip(range(rows), chosen)) if rows <= cols else list(zip(chosen, range(cols)))
+                 for chosen in itertools.permutations(range(max(rows, cols)), min(rows, cols))]
+    values = [sum(gain[i, j] for i, j in pairs) for pairs in matchings]
+    best = int(np.argmax(values))
+    matched = []
+    for i, j in matchings[best]:
+        if gain[i, j] > 0:
+            without = max(value - (gain[i, j] if (i, j) in pairs else 0.0) for value, pairs in zip(values, matchings))
+            matched.append((i, j, float(2.0 * (values[best] - without))))
+    return matched
 
 
 def _link_confidence(links: np.ndarray) -> float:

@@ -3,7 +3,8 @@
 Robust feature-based estimation: Shi-Tomasi corners tracked by pyramidal Lucas-Kanade with a
 forward-backward check, then a RANSAC fit of the chosen model (affine by default, similarity or
 homography), seeded by a similarity so that one fit covers one layer, and further motions among the
-outliers where large figures move (which one is the camera's: pipeline/stages/background.py).
+outliers where large figures move, each one step on top of the first (which one is the camera's:
+pipeline/stages/background.py).
 Optionally a hierarchical direct refinement in the spirit of Bergen et al.: ECC (enhanced correlation
 coefficient) maximisation coarse-to-fine on an image pyramid.
 
@@ -223,25 +224,52 @@ def _with_matched_sharpness(work: _WorkEstimate, prev: PreparedFrame, curr: Prep
     """Where one frame of the pair is much blurrier (gradient energy beyond background.SHARPNESS_RATIO), the pair is
     tracked again with the sharper frame blurred to match, and that fit's motion joins the others (or stands in
     where the first fit failed): LK between a motion-blurred frame and a sharp one drifts, most where a large figure
-    leaves few background corners, and the camera's motion can then be missing from the first fit's. The chooser
-    (background.py) decides among them as among the others; the first fit stays RANSAC's winner."""
+    leaves few background corners, and the camera's motion can then be missing from the first fit's. Where prev is
+    the blurrier, the pair is also tracked from corners found on curr (a motion-blurred frame's corners are fewer and
+    smeared), and that fit, turned round, joins too. The chooser (background.py) decides among them as among the
+    others; the first fit stays RANSAC's winner."""
     matched = _at_one_sharpness(prev, curr)
     if matched is None:
         return work
-    again = _track_and_fit(*matched, config, prev.ignore)
-    if again.failure is not None:
-        return work
+    for again in _matched_fits(matched, prev, curr, config):
+        work = _joined(work, again)
+    return work
+
+
+def _matched_fits(matched: tuple[np.ndarray, np.ndarray], prev: PreparedFrame, curr: PreparedFrame,
+                  config: MotionConfig) -> list[_WorkEstimate]:
+    """The fits of the pair at one sharpness (``matched``) that did not fail: from prev's corners, and where prev is
+    the blurrier, from curr's too (turned round)."""
+    fits = [_track_and_fit(*matched, config, prev.ignore)]
+    if prev.sharpness < curr.sharpness:
+        fits.append(_reversed(_track_and_fit(matched[1], matched[0], config, curr.ignore)))
+    return [fit for fit in fits if fit.failure is None]
+
+
+def _joined(work: _WorkEstimate, again: _WorkEstimate) -> _WorkEstimate:
+    """``work`` with ``again``'s motion among its others where it moves the frame differently from each of them
+    (the others with the most tracks keep their places); ``again`` where ``work`` failed."""
     if work.failure is not None:
         return again
     known = [work.curr_from_prev] + [matrix for matrix, _, _ in work.others]
     if any(corner_shift(again.curr_from_prev, matrix, work.prev_points) < ALTERNATIVE_MIN_SHIFT_PX for matrix in known):
         return work
     others = work.others
-    if len(others) >= MAX_OTHER_MOTIONS:  # room for it: the others with the most tracks stay
+    if len(others) >= MAX_OTHER_MOTIONS:
         others = sorted(others, key=lambda other: -len(other[1]))[:MAX_OTHER_MOTIONS - 1]
     inliers = again.inliers
     work.others = others + [(again.curr_from_prev, again.prev_points[inliers], again.curr_points[inliers])]
     return work
+
+
+def _reversed(work: _WorkEstimate) -> _WorkEstimate:
+    """A fit of curr_from_prev from one of prev_from_curr: each motion inverted, each track's ends swapped."""
+    if work.failure is not None:
+        return work
+    turned = dataclasses.replace(work, curr_from_prev=np.linalg.inv(work.curr_from_prev),
+                                 prev_points=work.curr_points, curr_points=work.prev_points)
+    turned.others = [(np.linalg.inv(geometry.to_3x3(matrix)), ends, starts) for matrix, starts, ends in work.others]
+    return turned
 
 
 def _at_one_sharpness(prev: PreparedFrame, curr: PreparedFrame) -> tuple[np.ndarray, np.ndarray] | None:
@@ -353,25 +381,45 @@ def _largest_first(first: _WorkEstimate, others: list[tuple[np.ndarray, np.ndarr
 def _other_motions(prev_pts: np.ndarray, curr_pts: np.ndarray, inliers: np.ndarray, first: np.ndarray,
                    config: MotionConfig) -> list[tuple[np.ndarray, np.ndarray]]:
     """Up to MAX_OTHER_MOTIONS further motions among the first fit's outliers, one after another (each among what
-    the ones before left): RANSAC keeps the motion most tracks agree on, which is a large textured figure's once it
-    holds more tracks than the background, and where several figures walk each moves its own way. A motion needs
-    ALTERNATIVE_MIN_SHARE of the tracks (at least ALTERNATIVE_MIN_TRACKS) and must move the frame at least
-    ALTERNATIVE_MIN_SHIFT_PX differently from each found before. (matrix, its tracks' indices) each, working px."""
+    the ones before left; ``_next_motion``): RANSAC keeps the motion most tracks agree on, which is a large textured
+    figure's once it holds more tracks than the background, and where several figures walk each moves its own way;
+    a background of sky leaves the camera's motion few tracks. A motion needs ALTERNATIVE_MIN_SHARE of the tracks
+    (at least ALTERNATIVE_MIN_TRACKS) and must move the frame at least ALTERNATIVE_MIN_SHIFT_PX differently from each
+    found before. (matrix, its tracks' indices) each, working px."""
     needed = max(ALTERNATIVE_MIN_TRACKS, int(ALTERNATIVE_MIN_SHARE * len(inliers)))
     left = ~inliers
     found: list[tuple[np.ndarray, np.ndarray]] = []
     while len(found) < MAX_OTHER_MOTIONS and left.sum() >= needed:
-        index = np.flatnonzero(left)
-        matrix, mask = _fit_model(prev_pts[index], curr_pts[index], config)
-        if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < needed:
+        taken, aside = _next_motion(prev_pts, curr_pts, np.flatnonzero(left), [first, *(f[0] for f in found)],
+                                    config, needed)
+        if taken is not None:
+            found.append(taken)
+            left[taken[1]] = False
+        elif aside is not None:
+            left[aside] = False  # depth within one layer (parallax), not a motion of its own: set aside
+        else:
             break
+    return found
+
+
+def _next_motion(prev_pts: np.ndarray, curr_pts: np.ndarray, index: np.ndarray, known: list[np.ndarray],
+                 config: MotionConfig, needed: int) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray | None]:
+    """The next motion among the tracks ``index``: one step on top of the first motion (``_fit_beside``), else
+    RANSAC's similarity-seeded fit (a figure nearer or farther than the first layer zooms differently, which no
+    common step follows). Returns (motion, its tracks) or None, and the tracks of a fit too like a ``known`` motion
+    (parallax) or None."""
+    aside = None
+    for fit in (lambda: _fit_beside(prev_pts[index], curr_pts[index], known[0], config),
+                lambda: _fit_model(prev_pts[index], curr_pts[index], config)):
+        matrix, mask = fit()
+        if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < needed:
+            continue
         motion = geometry.to_3x3(matrix)
         support = index[mask.ravel().astype(bool)]
-        left[support] = False
-        if min(corner_shift(motion, m, prev_pts) for m in [first, *(f[0] for f in found)]) < ALTERNATIVE_MIN_SHIFT_PX:
-            continue  # depth within one layer (parallax), not a motion of its own; its tracks are set aside
-        found.append((motion, support))
-    return found
+        if min(corner_shift(motion, m, prev_pts) for m in known) >= ALTERNATIVE_MIN_SHIFT_PX:
+            return (motion, support), None
+        aside = support if aside is None else aside
+    return None, aside
 
 
 def corner_shift(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> float:
@@ -458,16 +506,41 @@ def _fit_model(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig,
 
 def _fit_layer(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig, threshold: float):
     """One rigid layer's motion: RANSAC over a similarity (4 parameters) finds the layer's tracks, then the
-    configured model is fitted to them by least squares and takes every track it explains, twice. RANSAC over an
-    affine or a homography directly can explain two layers at once (a stretch that moves the background on one side
-    of a large figure and the figure on the other, each within the threshold); a similarity cannot."""
+    configured model is fitted to them (``_refit``). RANSAC over an affine or a homography directly can explain two
+    layers at once (a stretch that moves the background on one side of a large figure and the figure on the other,
+    each within the threshold); a similarity cannot."""
     seed, mask = cv2.estimateAffinePartial2D(prev_pts, curr_pts, method=cv2.RANSAC, ransacReprojThreshold=threshold,
                                              maxIters=2000, confidence=0.995, refineIters=20)
     if seed is None or mask is None or int(mask.sum()) < LAYER_MODEL_MIN_TRACKS:
         return seed, mask
-    matrix, inliers = seed, mask.ravel().astype(bool)
+    return _refit(prev_pts, curr_pts, mask.ravel().astype(bool), seed, config.model, threshold)
+
+
+def _fit_beside(prev_pts: np.ndarray, curr_pts: np.ndarray, first: np.ndarray, config: MotionConfig):
+    """Another layer's motion among the tracks ``first`` left: the tracks that move by one common step on top of
+    ``first`` (the layers of a frame share the camera's rotation and zoom, a figure adds its own step) make the
+    layer, and the configured model is fitted to them (``_refit``; a similarity on fewer than
+    LAYER_MODEL_MIN_TRACKS). RANSAC over a similarity here can join two far-apart groups of tracks of different
+    layers (its rotation and zoom make up their different steps), which is no layer's motion. The step is the one
+    most tracks share within twice RANSAC's threshold. Returns (matrix, (N, 1) uint8 inlier mask) as ``_fit_model``."""
+    threshold = config.ransac_threshold_px
+    steps = curr_pts - geometry.apply(first, prev_pts)
+    near = np.linalg.norm(steps[:, None, :] - steps[None, :, :], axis=2) < 2.0 * threshold
+    members = near[int(np.argmax(near.sum(axis=1)))]
+    shifted = geometry.to_3x3(first).copy()
+    shifted[:2] += np.outer(np.median(steps[members], axis=0), shifted[2])
+    seed = shifted if config.model == "homography" else shifted[:2]
+    model = config.model if int(members.sum()) >= LAYER_MODEL_MIN_TRACKS else "similarity"
+    return _refit(prev_pts, curr_pts, members, seed, model, threshold)
+
+
+def _refit(prev_pts: np.ndarray, curr_pts: np.ndarray, members: np.ndarray, seed: np.ndarray, model: str,
+           threshold: float):
+    """``model`` fitted by least squares to a layer's tracks (``members``), then to every track it explains within
+    ``threshold``, twice; ``seed`` where a fit fails. Returns (matrix, (N, 1) uint8 inlier mask)."""
+    matrix, inliers = seed, members
     for _ in range(2):
-        fitted = _least_squares(prev_pts[inliers], curr_pts[inliers], config.model)
+        fitted = _least_squares(prev_pts[inliers], curr_pts[inliers], model)
         if fitted is None:
             break
         error = np.linalg.norm(geometry.apply(geometry.to_3x3(fitted), prev_pts) - curr_pts, axis=1)
@@ -476,7 +549,7 @@ def _fit_layer(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig,
 
 
 def _least_squares(prev_pts: np.ndarray, curr_pts: np.ndarray, model: str) -> np.ndarray | None:
-    """The affine (2x3) or homography (3x3) fitting the point pairs best, None with too few of them."""
+    """The similarity or affine (2x3) or homography (3x3) fitting the point pairs best, None with too few of them."""
     if model == "homography":
         if len(prev_pts) < 4:
             return None
@@ -484,7 +557,14 @@ def _least_squares(prev_pts: np.ndarray, curr_pts: np.ndarray, model: str) -> np
         return matrix
     if len(prev_pts) < 3:
         return None
-    design = np.hstack([prev_pts.astype(np.float64), np.ones((len(prev_pts), 1))])
+    x, y = prev_pts[:, 0].astype(np.float64), prev_pts[:, 1].astype(np.float64)
+    if model == "similarity":  # x' = a x - b y + tx, y' = b x + a y + ty
+        ones, zeros = np.ones_like(x), np.zeros_like(x)
+        design = np.vstack([np.column_stack([x, -y, ones, zeros]), np.column_stack([y, x, zeros, ones])])
+        target = np.concatenate([curr_pts[:, 0], curr_pts[:, 1]]).astype(np.float64)
+        (a, b, tx, ty), _, rank, _ = np.linalg.lstsq(design, target, rcond=None)
+        return np.array([[a, -b, tx], [b, a, ty]]) if rank == 4 else None
+    design = np.column_stack([x, y, np.ones_like(x)])
     solution, _, rank, _ = np.linalg.lstsq(design, curr_pts.astype(np.float64), rcond=None)
     return solution.T if rank == 3 else None
 
