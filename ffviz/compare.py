@@ -112,6 +112,7 @@ def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progres
     sizes: list[tuple[int, int]] = []
     evidence = background.LayerEvidence()
     previous: motion.PreparedFrame | None = None
+    measured_before: motion.MotionEstimate | None = None
     with _reader(panel) as reader:
         info = reader.info
         for frame in reader:
@@ -124,6 +125,8 @@ def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progres
                 estimate = motion.MotionEstimate(geometry.IDENTITY.copy(), "cut")
             else:
                 estimate = motion.estimate(previous, prepared, config)
+            measured_before, estimate = estimate, motion.continued(measured_before, estimate, previous, prepared,
+                                                                   config)
             layers.extend(pair for _, pair in evidence.push(estimate, previous, prepared))
             statuses.append(estimate.status)
             previous = prepared

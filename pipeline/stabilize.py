@@ -59,8 +59,9 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
     """Pass 1: every pair's motion, the camera's chosen where a pair holds two (pipeline/stages/background.py; each
     estimate reaches ``observer`` once chosen, up to 2 x background.LAG_PAIRS pairs later).
 
-    ``frames``: estimate only these (a segment). The pairs (start - 2, start - 1) and (stop - 1, stop) are
-    estimated too, so that every pair of the range gets the estimate and the evidence a whole-video run gives it;
+    ``frames``: estimate only these (a segment). The pairs (start - 3, start - 2), (start - 2, start - 1) and (stop -
+    1, stop) are estimated too, so that every pair of the range gets the estimate and the evidence a whole-video run
+    gives it (the pair before its first carries layers on from the one before it: motion.continued);
     the choice is left to ``pipeline.segments.join_motion``, which makes it over the joined clip (the returned
     transforms are RANSAC's winners until then). ``workers``: pairs estimated at once (threads); results are taken
     in frame order, the same either way. ``keep_tracks``: keep each pair's inlier tracks (rolling-shutter
@@ -77,13 +78,16 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
             return pair, motion.MotionEstimate(np.eye(3), "cut", warning="frame size changed: treated as a cut")
         return pair, motion.estimate(pair.previous, pair.prepared, config)
 
+    measured_before = None  # the pair before's estimate as motion.estimate returned it (motion.continued)
     try:
         with one_pass(source) as decoded:
             pairs = _motion_pairs(decoded, source, config, ignore, frames)
-            for pair, estimate in parallel.ordered_map(estimate_pair, pairs, workers):
+            for pair, measured in parallel.ordered_map(estimate_pair, pairs, workers):
                 if frames is None or pair.frame.index in frames:
                     bar.update()
                 collected.waiting.append(_Waiting(pair.frame.index, pair.frame.time_s, pair.decoder_warnings))
+                estimate = motion.continued(measured_before, measured, pair.previous, pair.prepared, config)
+                measured_before = measured
                 for raw, layers in evidence.push(estimate, pair.previous, pair.prepared):
                     collected.add(raw, layers)
             for raw, layers in evidence.finish():
@@ -100,9 +104,9 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
 
 def _motion_pairs(decoded: Iterable[Frame], source: FrameSource, config: motion.MotionConfig,
                   ignore: _IgnoreMasks, frames: range | None) -> Iterator[_MotionPair]:
-    """Each frame with its predecessor, prepared (downscaled, histogram) on this thread; for a segment, from the
-    pair before its range to the pair after it (``estimate_motion``)."""
-    first = None if frames is None else max(frames.start - 1, 0)
+    """Each frame with its predecessor, prepared (downscaled, histogram) on this thread; for a segment, from two
+    pairs before its range to the pair after it (``estimate_motion``)."""
+    first = None if frames is None else max(frames.start - 2, 0)
     previous: motion.PreparedFrame | None = None
     for frame in decoded:
         mask = ignore.at(frame)

@@ -4,6 +4,8 @@ camera over a photograph, figures dressed in cuts of the photograph walking acro
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -50,13 +52,14 @@ def test_a_figure_covering_sixty_percent_shakes_the_view_no_more_than_a_small_on
         assert large_shakes[mode].px <= 1.5 * small_shakes[mode].px, mode
 
 
-@pytest.mark.parametrize("image, seed", [("coffee", 0), ("chelsea", 1), ("coffee", 9), ("rocket", 1)])
+@pytest.mark.parametrize("image, seed", [("coffee", 0), ("chelsea", 1), ("coffee", 9), ("rocket", 1), ("chelsea", 2)])
 def test_a_half_frame_figure_with_blurred_frames_shakes_the_view_no_more_than_a_small_one(image, seed):
     """A figure covering half the frame, every third frame motion-blurred: a pair between a blurred and a sharp frame
     is also tracked at one sharpness (motion._with_matched_sharpness), from the sharper frame's corners too, or its
     few background corners drift and neither of its motions is the camera's (one pair 16 px off on the first,
     several on the second; on the third, a pair from a blurred frame 12 px off with prev's corners alone; on the
-    fourth, a sky, a few of whose corners a similarity fitted among the outliers joined to a figure's)."""
+    fourth, a sky, a few of whose corners a similarity fitted among the outliers joined to a figure's; on the
+    fifth, a pair where neither fit held the background, which the pair before's tracks carry on: motion.continued)."""
     large = foreground.clip("half, blurred", image, seed)
     small = foreground.clip("small, blurred", image, seed)
     large_shakes = foreground.residual_shakes(large, ("full", "crop"))
@@ -132,6 +135,35 @@ def test_a_fit_turned_round_is_the_fit_of_the_pair_the_other_way():
     assert np.allclose(geometry.apply(turned.curr_from_prev, turned.prev_points), turned.curr_points, atol=1e-3)
     matrix, starts, ends = turned.others[0]
     assert np.allclose(geometry.apply(matrix, starts), ends, atol=1e-3)
+
+
+def test_a_layer_the_pair_does_not_continue_is_tracked_on_from_its_ends():
+    """The pair before held the background (on its left) and a figure; this pair's search found only the figure (the
+    background's corners too few among its tracks): the background's track ends, tracked on, give the camera's motion
+    as another of this pair's; where this pair's tracks do continue the background, nothing is added."""
+    rng = np.random.default_rng(2)
+    world = cv2.GaussianBlur(rng.uniform(0, 255, (400, 560)).astype(np.float32), (0, 0), 3.0)
+    world = cv2.normalize(world, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+
+    def frame(x: int, y: int) -> np.ndarray:
+        return cv2.cvtColor(np.ascontiguousarray(world[y:y + 240, x:x + 320]), cv2.COLOR_GRAY2RGB)
+
+    config = motion.MotionConfig()
+    previous, prepared = motion.prepare(frame(100, 80), config), motion.prepare(frame(95, 83), config)
+    camera = shift(5.0, -3.0)  # the view moves right 5 px and up 3 px from previous to prepared
+    ends = cv2.goodFeaturesToTrack(previous.gray[:, :120], 40, 0.01, 8).reshape(-1, 2)
+    figure_ends = np.array([[200.0 + 8 * k, 120.0] for k in range(10)], np.float32)
+    figure = shift(-12.0, 0.0)
+    before = motion.MotionEstimate(figure, "ok", prev_points=figure_ends - [12.0, 0.0], curr_points=figure_ends,
+                                   inliers=np.ones(10, bool), others=(motion.OtherMotion(shift(4.0, 1.0), ends, ends),))
+    only_figure = motion.MotionEstimate(figure, "ok", prev_points=figure_ends, curr_points=figure_ends - [12.0, 0.0],
+                                        inliers=np.ones(10, bool))
+    found = motion.continued(before, only_figure, previous, prepared, config)
+    assert len(found.others) == 1
+    assert geometry.corner_error(found.others[0].curr_from_prev, camera, 320, 240) < 0.2
+    both = dataclasses.replace(only_figure, others=(motion.OtherMotion(camera, ends, geometry.apply(camera, ends)),))
+    assert motion.continued(before, both, previous, prepared, config) is both
+    assert motion.continued(None, only_figure, previous, prepared, config) is only_figure
 
 
 def test_occlusion_votes_put_the_moving_square_in_front(tmp_path):

@@ -24,7 +24,8 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
-from pipeline.stages.background import SHARPNESS_RATIO, CameraChoice, at_one_sharpness, gradient_energy
+from pipeline.stages.background import (LINK_RADIUS, LINK_TRACKS, SHARPNESS_RATIO, CameraChoice, at_one_sharpness,
+                                       gradient_energy, motions_of, track_ends, track_starts)
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
@@ -219,6 +220,58 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
     )
 
 
+def continued(before: MotionEstimate | None, estimate: MotionEstimate, previous: PreparedFrame | None,
+              prepared: PreparedFrame, config: MotionConfig) -> MotionEstimate:
+    """``estimate`` with each layer of the pair before (``before``, as ``estimate`` returned it) that none of its
+    motions continues tracked on from that layer's track ends and fitted as another motion (``_carried``). Where a
+    layer leaves too few corners in a pair for the search among RANSAC's outliers (a sky behind three figures, a
+    motion-blurred frame), the camera's motion is otherwise missing there, and the chooser must follow a figure
+    across the pair. Only layers ``before`` measured are carried, so a pair's motions depend on the one pair before
+    it alone. A layer is continued where LINK_TRACKS / 2 of its ends have a track of this pair starting within
+    background.LINK_RADIUS."""
+    if before is None or previous is None or before.status != "ok" or estimate.status != "ok" or not before.others:
+        return estimate
+    starts = np.concatenate(track_starts(estimate))
+    radius = LINK_RADIUS * max(prepared.width, prepared.height)
+    carried: list[OtherMotion] = []
+    for ends in track_ends(before):
+        if len(ends) < ALTERNATIVE_MIN_TRACKS or _continues(ends, starts, radius):
+            continue
+        layer = _carried(ends, previous, prepared, config)
+        known = [*motions_of(estimate), *(other.curr_from_prev for other in carried)]
+        if layer is not None and min(corner_shift(layer.curr_from_prev, matrix, layer.prev_points)
+                                     for matrix in known) >= ALTERNATIVE_MIN_SHIFT_PX / prepared.scale:
+            carried.append(layer)
+    return dataclasses.replace(estimate, others=estimate.others + tuple(carried)) if carried else estimate
+
+
+def _continues(ends: np.ndarray, starts: np.ndarray, radius: float) -> bool:
+    if not len(starts):
+        return False
+    import scipy.spatial  # here: only pairs after one with several motions need it
+
+    distance, _ = scipy.spatial.cKDTree(starts).query(ends, k=1)
+    return int((distance <= radius).sum()) >= LINK_TRACKS / 2
+
+
+def _carried(ends: np.ndarray, previous: PreparedFrame, prepared: PreparedFrame,
+             config: MotionConfig) -> OtherMotion | None:
+    """A layer's track ends (full px, in previous) tracked into prepared and fitted as one layer; None where too few
+    of them track or agree."""
+    cv2.setRNGSeed(RANSAC_SEED)  # as ``estimate``: the same fit whatever ran before
+    prev_pts, curr_pts = _track(previous.gray, prepared.gray, ends * prepared.scale, _first_pass_lk(config),
+                                config.fb_max_error_px)
+    if len(prev_pts) < ALTERNATIVE_MIN_TRACKS:
+        return None
+    matrix, mask = _fit_model(prev_pts, curr_pts, config)
+    if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < ALTERNATIVE_MIN_TRACKS:
+        return None
+    held = mask.ravel().astype(bool)
+    to_full = 1.0 / prepared.scale
+    return OtherMotion(geometry.rescale_transform(geometry.to_3x3(matrix), prepared.scale), prev_pts[held] * to_full,
+                       curr_pts[held] * to_full)
+
+
 def _with_matched_sharpness(work: _WorkEstimate, prev: PreparedFrame, curr: PreparedFrame,
                             config: MotionConfig) -> _WorkEstimate:
     """Where one frame of the pair is much blurrier (gradient energy beyond background.SHARPNESS_RATIO), the pair is
@@ -301,6 +354,13 @@ class _WorkEstimate:
     others: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)  # (matrix, prev, curr)
 
 
+def _first_pass_lk(config: MotionConfig) -> dict:
+    """LK's settings for a first tracking pass, which only needs to land within a pixel (RANSAC and the refining pass
+    do the rest): loose, cheap termination."""
+    return dict(winSize=(config.lk_window, config.lk_window), maxLevel=config.lk_levels,
+                criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03))
+
+
 def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig,
                    ignore: np.ndarray | None = None) -> _WorkEstimate:
     corners = _detect_corners(prev_gray, config)
@@ -311,9 +371,7 @@ def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionC
     if len(corners) < config.min_inliers:
         return _WorkEstimate(geometry.IDENTITY.copy(), f"featureless frame ({len(corners)} corners)")
 
-    # Pass 1 only needs to land within a pixel (RANSAC and pass 2 do the rest): loose, cheap termination.
-    lk = dict(winSize=(config.lk_window, config.lk_window), maxLevel=config.lk_levels,
-              criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03))
+    lk = _first_pass_lk(config)
     corners = corners.reshape(-1, 2)
     curr_from_prev = geometry.IDENTITY.copy()
     result = _WorkEstimate(curr_from_prev, "no tracking pass ran")
