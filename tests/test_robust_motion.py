@@ -140,7 +140,8 @@ def test_a_fit_turned_round_is_the_fit_of_the_pair_the_other_way():
 def test_a_layer_the_pair_does_not_continue_is_tracked_on_from_its_ends():
     """The pair before held the background (on its left) and a figure; this pair's search found only the figure (the
     background's corners too few among its tracks): the background's track ends, tracked on, give the camera's motion
-    as another of this pair's; where this pair's tracks do continue the background, nothing is added."""
+    as another of this pair's; where this pair's tracks do continue the background, or the ends lie where features
+    are ignored, nothing is added."""
     rng = np.random.default_rng(2)
     world = cv2.GaussianBlur(rng.uniform(0, 255, (400, 560)).astype(np.float32), (0, 0), 3.0)
     world = cv2.normalize(world, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
@@ -164,6 +165,10 @@ def test_a_layer_the_pair_does_not_continue_is_tracked_on_from_its_ends():
     both = dataclasses.replace(only_figure, others=(motion.OtherMotion(camera, ends, geometry.apply(camera, ends)),))
     assert motion.continued(before, both, previous, prepared, config) is both
     assert motion.continued(None, only_figure, previous, prepared, config) is only_figure
+    ignored = np.zeros((240, 320), bool)
+    ignored[:, :130] = True  # --ignore over the background's ends: they are not tracked on
+    boxed = motion.prepare(frame(100, 80), config, ignored)
+    assert motion.continued(before, only_figure, boxed, prepared, config) is only_figure
 
 
 def test_occlusion_votes_put_the_moving_square_in_front(tmp_path):

@@ -259,8 +259,10 @@ def _carried(ends: np.ndarray, previous: PreparedFrame, prepared: PreparedFrame,
     """A layer's track ends (full px, in previous) tracked into prepared and fitted as one layer; None where too few
     of them track or agree."""
     cv2.setRNGSeed(RANSAC_SEED)  # as ``estimate``: the same fit whatever ran before
-    prev_pts, curr_pts = _track(previous.gray, prepared.gray, ends * prepared.scale, _first_pass_lk(config),
-                                config.fb_max_error_px)
+    starts = _outside((ends * prepared.scale).astype(np.float32), previous.ignore)
+    if len(starts) < ALTERNATIVE_MIN_TRACKS:
+        return None
+    prev_pts, curr_pts = _track(previous.gray, prepared.gray, starts, _first_pass_lk(config), config.fb_max_error_px)
     if len(prev_pts) < ALTERNATIVE_MIN_TRACKS:
         return None
     matrix, mask = _fit_model(prev_pts, curr_pts, config)
@@ -354,6 +356,15 @@ class _WorkEstimate:
     others: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)  # (matrix, prev, curr)
 
 
+def _outside(points: np.ndarray, ignore: np.ndarray | None) -> np.ndarray:
+    """``points`` (working px) outside ``ignore`` (bool, working size; None: all)."""
+    if ignore is None or not len(points):
+        return points
+    x = np.clip(np.round(points[:, 0]).astype(int), 0, ignore.shape[1] - 1)
+    y = np.clip(np.round(points[:, 1]).astype(int), 0, ignore.shape[0] - 1)
+    return points[~ignore[y, x]]
+
+
 def _first_pass_lk(config: MotionConfig) -> dict:
     """LK's settings for a first tracking pass, which only needs to land within a pixel (RANSAC and the refining pass
     do the rest): loose, cheap termination."""
@@ -363,11 +374,7 @@ def _first_pass_lk(config: MotionConfig) -> dict:
 
 def _track_and_fit(prev_gray: np.ndarray, curr_gray: np.ndarray, config: MotionConfig,
                    ignore: np.ndarray | None = None) -> _WorkEstimate:
-    corners = _detect_corners(prev_gray, config)
-    if ignore is not None and len(corners):
-        x = np.clip(np.round(corners[:, 0]).astype(int), 0, ignore.shape[1] - 1)
-        y = np.clip(np.round(corners[:, 1]).astype(int), 0, ignore.shape[0] - 1)
-        corners = corners[~ignore[y, x]]
+    corners = _outside(_detect_corners(prev_gray, config), ignore)
     if len(corners) < config.min_inliers:
         return _WorkEstimate(geometry.IDENTITY.copy(), f"featureless frame ({len(corners)} corners)")
 
