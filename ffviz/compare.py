@@ -125,8 +125,9 @@ def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progres
                 estimate = motion.MotionEstimate(geometry.IDENTITY.copy(), "cut")
             else:
                 estimate = motion.estimate(previous, prepared, config)
-            measured_before, estimate = estimate, motion.continued(measured_before, estimate, previous, prepared,
-                                                                   config)
+            measured = estimate
+            estimate = motion.continued(measured_before, measured, previous, prepared, config)
+            measured_before = measured
             layers.extend(pair for _, pair in evidence.push(estimate, previous, prepared))
             statuses.append(estimate.status)
             previous = prepared

@@ -266,7 +266,7 @@ def _carried(ends: np.ndarray, previous: PreparedFrame, prepared: PreparedFrame,
     if len(prev_pts) < ALTERNATIVE_MIN_TRACKS:
         return None
     matrix, mask = _fit_model(prev_pts, curr_pts, config)
-    if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < ALTERNATIVE_MIN_TRACKS:
+    if not _holds(matrix, mask, ALTERNATIVE_MIN_TRACKS):
         return None
     held = mask.ravel().astype(bool)
     to_full = 1.0 / prepared.scale
@@ -477,7 +477,7 @@ def _next_motion(prev_pts: np.ndarray, curr_pts: np.ndarray, index: np.ndarray, 
     for fit in (lambda: _fit_beside(prev_pts[index], curr_pts[index], known[0], config),
                 lambda: _fit_model(prev_pts[index], curr_pts[index], config)):
         matrix, mask = fit()
-        if matrix is None or mask is None or not np.all(np.isfinite(matrix)) or int(mask.sum()) < needed:
+        if not _holds(matrix, mask, needed):
             continue
         motion = geometry.to_3x3(matrix)
         support = index[mask.ravel().astype(bool)]
@@ -485,6 +485,11 @@ def _next_motion(prev_pts: np.ndarray, curr_pts: np.ndarray, index: np.ndarray, 
             return (motion, support), None
         aside = support if aside is None else aside
     return None, aside
+
+
+def _holds(matrix: np.ndarray | None, mask: np.ndarray | None, needed: int) -> bool:
+    """A fit (as ``_fit_model`` returns it) that gave a finite motion on at least ``needed`` tracks."""
+    return matrix is not None and mask is not None and bool(np.all(np.isfinite(matrix))) and int(mask.sum()) >= needed
 
 
 def corner_shift(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> float:
