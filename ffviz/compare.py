@@ -112,7 +112,7 @@ def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progres
     sizes: list[tuple[int, int]] = []
     evidence = background.LayerEvidence()
     previous: motion.PreparedFrame | None = None
-    measured_before: motion.MotionEstimate | None = None
+    before: motion.MotionEstimate | None = None  # the pair before's estimate as motion.continued returned it
     with _reader(panel) as reader:
         info = reader.info
         for frame in reader:
@@ -125,9 +125,7 @@ def camera_path(panel: Panel, config: motion.MotionConfig = PATH_MOTION, progres
                 estimate = motion.MotionEstimate(geometry.IDENTITY.copy(), "cut")
             else:
                 estimate = motion.estimate(previous, prepared, config)
-            measured = estimate
-            estimate = motion.continued(measured_before, measured, previous, prepared, config)
-            measured_before = measured
+            estimate = before = motion.continued(before, estimate, previous, prepared, config)
             layers.extend(pair for _, pair in evidence.push(estimate, previous, prepared))
             statuses.append(estimate.status)
             previous = prepared

@@ -346,7 +346,9 @@ class RerunRecorder:
             count = len(choice.behind)
             taken = f"motion {choice.taken + 1} of {count} ({'RANSAC' if choice.taken == 0 else 'another'}'s; " \
                     "orange: the others')"
-            votes = ", ".join(f"{b} behind/{f} in front" for b, f in zip(choice.behind, choice.in_front))
+            carried = choice.carried or (0,) * count
+            votes = ", ".join(f"{b} behind/{f} in front" + (f" (tracked on {k} pair{'s' * (k > 1)})" if k else "")
+                              for b, f, k in zip(choice.behind, choice.in_front, carried))
             line = (f"camera: {taken}; decided by {choice.rule} (log-odds for it: occlusion {choice.occlusion:+.1f}, "
                     f"the frames around it {choice.linked:+.1f}; occlusion px of each motion: {votes})")
         self._columns.add(ent.MOTION_CAMERA_RULE, Row(rr.TextLog, {"text": line}), stamp.index, stamp.time_s)

@@ -17,7 +17,6 @@ import numpy as np
 from pipeline.frames import Frame
 from pipeline.stages.completion import CompletionResult
 from pipeline.stages.adaptive_crop import AdaptiveCrop
-from pipeline.stages.background import PairLayers
 from pipeline.stages.deblur import DeblurResult
 from pipeline.stages.rolling_shutter import Correction, Tracks
 from pipeline.stages.smoothing import SmoothingResult
@@ -43,9 +42,6 @@ class MotionPass:
     times_s: list[float]
     warnings: list[tuple[int | None, str]]
     tracks: list[Tracks | None] | None = None  # each pair's inlier tracks, kept for rolling-shutter correction only
-    # A segment's pass, before pipeline.segments.join_motion chooses each pair's camera motion over the joined clip:
-    # each pair's motions and evidence (curr_from_prev holds RANSAC's winners, and tracks one entry per motion).
-    layers: list[PairLayers] | None = None
 
     @property
     def n_frames(self) -> int:

@@ -1,14 +1,11 @@
 """Segment-parallel stabilization of one video, with frames identical to the whole-video run.
 
-A video is cut into segments of consecutive frames. Pass 1 estimates the motion of each segment
-independently: the segment owning frames a..b-1 also reads frames a - 2, a - 1 and b, so each of its pairs is
-estimated exactly as in one run (each estimate depends on its pair alone: RANSAC is reseeded per estimate, cut
-detection compares the pair's histograms) and gets the evidence one run gives it for choosing the camera's motion
-(stages/background.py: the links to the pair before, the occlusion test at both its frames); the choice itself is
-made over the joined clip. The path is smoothed as a whole (it is tiny). Pass 2 renders
-each segment while reading ``radius`` frames either side of it (the completion/deblur window), so every
-frame sees the neighbours it sees in one run. The frames come back in order and are written once, with
-the audio, by the caller's process.
+Pass 1 (motion) runs over the whole video in one task, in order: a pair's motions depend on the pairs before it
+(motion.continued tracks each layer on from pair to pair), and the camera's choice is made over the clip. The path is
+smoothed as a whole (it is tiny). Pass 2, completion and deblurring, the costly part, is cut into segments of
+consecutive frames that run in parallel, each reading ``radius`` frames either side of it (the completion/deblur
+window), so every frame sees the neighbours it sees in one run. The frames come back in order and are written once,
+with the audio, by the caller's process.
 
 No scheduler here: ``run`` takes a ``mapper`` that applies a function to a list of argument tuples and
 yields the results in order (``serial_map`` below, or Ray in ffviz/batch.py).
@@ -20,8 +17,6 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
-import numpy as np
-
 from pipeline import stabilize as stab
 from pipeline.chain import render_frames
 from pipeline.errors import ConfigError, InputError
@@ -30,7 +25,6 @@ from pipeline.runtime.encoding import Encoding
 from pipeline.runtime import video_reader, video_writer
 from pipeline.runtime.observer import NullObserver, Observer, null_progress
 from pipeline.runtime.source import FileSource
-from pipeline.stages import background
 
 Mapper = Callable[[Callable[..., Any], Sequence[tuple]], Iterable[Any]]
 OPEN_END = sys.maxsize  # the last segment reads to the end, whatever the header's frame count said
@@ -49,29 +43,10 @@ def plan(n_frames: int, segment_frames: int) -> list[range]:
     return [range(a, b) for a, b in zip(starts, starts[1:] + [OPEN_END])]
 
 
-def motion_segment(path: Path, config: stab.StabilizeConfig, frames: range) -> MotionPass:
-    """Pass 1 over one segment; empty where the header promised more frames than the file holds."""
-    try:
-        return stab.estimate_motion(FileSource(path), config.motion, observer=NullObserver(),
-                                    progress=null_progress, total=None, frames=frames,
-                                    keep_tracks=config.rolling_shutter is not None)
-    except InputError:
-        if frames.start == 0:
-            raise
-        return MotionPass(np.zeros((0, 3, 3)), [], [], [])
-
-
-def join_motion(parts: Iterable[MotionPass]) -> MotionPass:
-    """The segments' passes as one, each pair's camera motion chosen over the whole clip from their evidence, as a
-    whole-video run chooses it (background.decide)."""
-    parts = [p for p in parts if p.statuses]
-    layers = [pair for p in parts for pair in p.layers]
-    choices = background.decide(layers)
-    tracks = None if any(p.tracks is None for p in parts) else \
-        [options[choice.taken] for options, choice in zip((pair for p in parts for pair in p.tracks), choices)]
-    return MotionPass(np.array([pair.motions[choice.taken] for pair, choice in zip(layers, choices)]),
-                      [s for p in parts for s in p.statuses], [t for p in parts for t in p.times_s],
-                      [w for p in parts for w in p.warnings], tracks)
+def motion_pass(path: Path, config: stab.StabilizeConfig) -> MotionPass:
+    """Pass 1 over the whole video (in a task of the mapper's)."""
+    return stab.estimate_motion(FileSource(path), config.motion, observer=NullObserver(), progress=null_progress,
+                                total=None, keep_tracks=config.rolling_shutter is not None)
 
 
 def render_segment(path: Path, config: stab.StabilizeConfig, frames: range, plan: PathPlan) -> list[FrameResult]:
@@ -99,12 +74,11 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
     if output_path is not None:
         video_writer.check_output_path(output_path, input_path, overwrite=overwrite)
 
-    def motion_pass() -> MotionPass:
-        ranges = plan(video_reader.count_frames(input_path), segment_frames)
-        joined = join_motion(mapper(motion_segment, [(input_path, config, r) for r in ranges]))
-        for frame, message in joined.warnings:
-            observer.on_warning(None if frame is None else Stamp(frame, joined.times_s[frame]), message)
-        return joined
+    def whole_motion() -> MotionPass:
+        found = next(iter(mapper(motion_pass, [(input_path, config)])))
+        for frame, message in found.warnings:
+            observer.on_warning(None if frame is None else Stamp(frame, found.times_s[frame]), message)
+        return found
 
     def frames(path_plan: PathPlan) -> Iterator[FrameResult]:
         n_frames = path_plan.motion.n_frames
@@ -120,4 +94,4 @@ def run(input_path: Path | str, output_path: Path | str | None, config: stab.Sta
             if on_segment is not None:
                 on_segment(done, len(ranges))
 
-    return stab.run_passes(info, output_path, config, motion_pass, frames, observer=observer, encoding=encoding)
+    return stab.run_passes(info, output_path, config, whole_motion, frames, observer=observer, encoding=encoding)

@@ -54,19 +54,14 @@ class StabilizeReport:
 
 
 def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observer: Observer,
-                    progress: ProgressFactory, total: int | None, frames: range | None = None,
-                    workers: int = 1, keep_tracks: bool = False) -> MotionPass:
-    """Pass 1: every pair's motion, the camera's chosen where a pair holds two (pipeline/stages/background.py; each
-    estimate reaches ``observer`` once chosen, up to 2 x background.LAG_PAIRS pairs later).
-
-    ``frames``: estimate only these (a segment). The pairs (start - 3, start - 2), (start - 2, start - 1) and (stop -
-    1, stop) are estimated too, so that every pair of the range gets the estimate and the evidence a whole-video run
-    gives it (the pair before its first carries layers on from the one before it: motion.continued);
-    the choice is left to ``pipeline.segments.join_motion``, which makes it over the joined clip (the returned
-    transforms are RANSAC's winners until then). ``workers``: pairs estimated at once (threads); results are taken
-    in frame order, the same either way. ``keep_tracks``: keep each pair's inlier tracks (rolling-shutter
-    correction fits them after the pass)."""
-    collected = _PassOne(observer, keep_tracks, frames)
+                    progress: ProgressFactory, total: int | None, workers: int = 1,
+                    keep_tracks: bool = False) -> MotionPass:
+    """Pass 1, over the whole clip in order: every pair's motion, with the layers of the pair before carried on
+    (motion.continued), the camera's chosen where a pair holds several (pipeline/stages/background.py; each
+    estimate reaches ``observer`` once chosen, up to 2 x background.LAG_PAIRS pairs later). ``workers``: pairs
+    estimated at once (threads); results are taken in frame order, the same either way. ``keep_tracks``: keep each
+    pair's inlier tracks (rolling-shutter correction fits them after the pass)."""
+    collected = _PassOne(observer, keep_tracks)
     bar = progress("pass 1/2: motion", total)
     ignore = _IgnoreMasks(config, source.info.width, source.info.height)
     evidence = background.LayerEvidence()
@@ -78,16 +73,14 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
             return pair, motion.MotionEstimate(np.eye(3), "cut", warning="frame size changed: treated as a cut")
         return pair, motion.estimate(pair.previous, pair.prepared, config)
 
-    measured_before = None  # the pair before's estimate as motion.estimate returned it (motion.continued)
+    before = None  # the pair before's estimate as motion.continued returned it
     try:
         with one_pass(source) as decoded:
-            pairs = _motion_pairs(decoded, source, config, ignore, frames)
+            pairs = _motion_pairs(decoded, source, config, ignore)
             for pair, measured in parallel.ordered_map(estimate_pair, pairs, workers):
-                if frames is None or pair.frame.index in frames:
-                    bar.update()
+                bar.update()
                 collected.waiting.append(_Waiting(pair.frame.index, pair.frame.time_s, pair.decoder_warnings))
-                estimate = motion.continued(measured_before, measured, pair.previous, pair.prepared, config)
-                measured_before = measured
+                estimate = before = motion.continued(before, measured, pair.previous, pair.prepared, config)
                 for raw, layers in evidence.push(estimate, pair.previous, pair.prepared):
                     collected.add(raw, layers)
             for raw, layers in evidence.finish():
@@ -103,34 +96,22 @@ def estimate_motion(source: FrameSource, config: motion.MotionConfig, *, observe
 
 
 def _motion_pairs(decoded: Iterable[Frame], source: FrameSource, config: motion.MotionConfig,
-                  ignore: _IgnoreMasks, frames: range | None) -> Iterator[_MotionPair]:
-    """Each frame with its predecessor, prepared (downscaled, histogram) on this thread; for a segment, from two
-    pairs before its range to the pair after it (``estimate_motion``)."""
-    first = None if frames is None else max(frames.start - 2, 0)
+                  ignore: _IgnoreMasks) -> Iterator[_MotionPair]:
+    """Each frame with its predecessor, prepared (downscaled, histogram) on this thread."""
     previous: motion.PreparedFrame | None = None
     for frame in decoded:
-        mask = ignore.at(frame)
-        if frames is not None and frame.index > frames.stop:
-            source.drain_warnings()  # the next segment's
-            return
-        if first is not None and frame.index < first:
-            source.drain_warnings()  # an earlier segment's
-            if frame.index == first - 1:
-                previous = motion.prepare(frame.rgb, config, mask)
-            continue
-        prepared = motion.prepare(frame.rgb, config, mask)
-        warnings = source.drain_warnings()
-        yield _MotionPair(frame, previous, prepared, warnings if frames is None or frame.index in frames else [])
+        prepared = motion.prepare(frame.rgb, config, ignore.at(frame))
+        yield _MotionPair(frame, previous, prepared, source.drain_warnings())
         previous = prepared
 
 
 class _PassOne:
     """What pass 1 collects, pair by pair in frame order: the raw estimates wait (``waiting``) until the camera
-    chooser has decided them (a whole video), or are kept raw with their evidence (a segment)."""
+    chooser has decided them."""
 
-    def __init__(self, observer: Observer, keep_tracks: bool, frames: range | None) -> None:
-        self.observer, self.keep_tracks, self.frames = observer, keep_tracks, frames
-        self.chooser = background.CameraChooser() if frames is None else None
+    def __init__(self, observer: Observer, keep_tracks: bool) -> None:
+        self.observer, self.keep_tracks = observer, keep_tracks
+        self.chooser = background.CameraChooser()
         self.waiting: collections.deque[_Waiting] = collections.deque()  # not the frames: 180 at 4K are 4 GB
         self.raw: collections.deque[motion.MotionEstimate] = collections.deque()
         self.transforms: list[np.ndarray] = []
@@ -138,25 +119,17 @@ class _PassOne:
         self.statuses: list[str] = []
         self.times: list[float] = []
         self.warnings: list[tuple[int | None, str]] = []
-        self.layers: list[background.PairLayers] = []
 
     def add(self, raw: motion.MotionEstimate, layers: background.PairLayers) -> None:
-        if self.chooser is None:
-            self._emit(self.waiting.popleft(), raw, layers)
-            return
         self.raw.append(raw)
         for _, choice in self.chooser.push(layers):
-            self._emit(self.waiting.popleft(), motion.with_camera(self.raw.popleft(), choice), None)
+            self._emit(self.waiting.popleft(), motion.with_camera(self.raw.popleft(), choice))
 
     def finish(self) -> None:
-        if self.chooser is not None:
-            for _, choice in self.chooser.finish():
-                self._emit(self.waiting.popleft(), motion.with_camera(self.raw.popleft(), choice), None)
+        for _, choice in self.chooser.finish():
+            self._emit(self.waiting.popleft(), motion.with_camera(self.raw.popleft(), choice))
 
-    def _emit(self, frame: _Waiting, estimate: motion.MotionEstimate,
-              layers: background.PairLayers | None) -> None:
-        if self.frames is not None and frame.index not in self.frames:
-            return  # a pair another segment owns, estimated for this one's evidence
+    def _emit(self, frame: _Waiting, estimate: motion.MotionEstimate) -> None:
         stamp = Stamp(frame.index, frame.time_s)
         for message in frame.decoder_warnings:  # decoder complaints (corrupt packets skipped)
             self.warnings.append((frame.index, message))
@@ -167,18 +140,13 @@ class _PassOne:
         self.observer.on_motion(stamp, estimate)
         self.transforms.append(estimate.curr_from_prev)
         if self.keep_tracks:
-            self.tracks.append(rolling_shutter.inlier_tracks(estimate) if layers is None else
-                               tuple(rolling_shutter.inlier_tracks(motion.with_camera(estimate, choice))
-                                     for choice in background.every_choice(layers)))
+            self.tracks.append(rolling_shutter.inlier_tracks(estimate))
         self.statuses.append(estimate.status)
         self.times.append(frame.time_s)
-        if layers is not None:
-            self.layers.append(layers)
 
     def motion_pass(self) -> MotionPass:
         return MotionPass(np.array(self.transforms), self.statuses, self.times, self.warnings,
-                          self.tracks if self.keep_tracks else None,
-                          layers=None if self.frames is None else self.layers)
+                          self.tracks if self.keep_tracks else None)
 
 
 class _IgnoreMasks:

@@ -69,8 +69,9 @@ def test_foreground_tracks_are_the_other_motions(run):
 
 
 def test_each_pair_says_which_motion_the_camera_took_and_why(run):
-    """The camera's choice at every pair (pipeline/stages/background.py): a line naming the motion taken and the
-    rule that weighed most, and the evidence for it charted, as the estimates say."""
+    """The camera's choice at every pair (pipeline/stages/background.py): a line naming the motion taken, the rule
+    that weighed most and the motions tracked on from pairs before, and the evidence for it charted, as the estimates
+    say."""
     recording, collector = run
     estimates = {stamp.index: e for stamp, e in collector.results["motion"]}
     lines = {t: text[0] for t, text in rows_at(recording, ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
@@ -81,6 +82,9 @@ def test_each_pair_says_which_motion_the_camera_took_and_why(run):
             assert lines[t].startswith("one motion")
         else:
             assert f"motion {choice.taken + 1} of {len(estimate.others) + 1}" in lines[t] and choice.rule in lines[t]
+            carried = [k for k in choice.carried if k]  # layers tracked on from pairs before (motion.continued)
+            assert lines[t].count("tracked on") == len(carried)
+            assert all(f"tracked on {k} pair" in lines[t] for k in carried)
     frames, linked = recording.scalars(f"{ent.MOTION_CAMERA}/linked")
     assert frames.tolist() == sorted(estimates)
     assert np.allclose(linked, [estimates[t].camera.linked for t in frames.tolist()])

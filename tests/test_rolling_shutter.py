@@ -209,7 +209,8 @@ def test_full_mode_completes_from_neighbours_corrected_alike(monkeypatch):
 
 
 def test_segment_run_plans_the_whole_runs_correction(tmp_path):
-    """Segments join their inlier tracks, so the correction and every output transform are the whole run's."""
+    """A segment run's pass 1 is the whole run's, inlier tracks included, so the correction and every output
+    transform are the whole run's."""
     from pipeline.evaluation.synthetic import write_video
     from pipeline import segments
     from pipeline.stabilize import stabilize

@@ -45,6 +45,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "curr_from_prev": NotRecorded("a figure's motion; its effect is which motion the camera took"),
         "prev_points": NotRecorded("where its tracks start; their ends are drawn"),
         "curr_points": (ent.MOTION_FOREGROUND,),
+        "carried": (ent.MOTION_CAMERA_RULE,),
     },
     "CameraChoice": {  # how the camera's motion was chosen (pipeline/stages/background.py)
         "taken": (ent.MOTION_CAMERA_RULE,),
@@ -53,6 +54,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "linked": (f"{ent.MOTION_CAMERA}/linked",),
         "behind": (ent.MOTION_CAMERA_RULE,),
         "in_front": (ent.MOTION_CAMERA_RULE,),
+        "carried": (ent.MOTION_CAMERA_RULE,),
     },
     "PathPlan": {  # on_path, once
         "motion": Nested("MotionPass"),
@@ -76,14 +78,6 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "statuses": NotRecorded("recorded frame by frame from on_motion"),
         "times_s": (ent.VIDEO_TIME_TIMELINE,),
         "warnings": (ent.LOG,),
-        "layers": Nested("PairLayers"),
-    },
-    "PairLayers": {  # a segment's evidence before the join chooses; what it chose is each pair's CameraChoice
-        "motions": NotRecorded("the camera's is recorded frame by frame from on_motion"),
-        "links": NotRecorded("its effect is CameraChoice.linked"),
-        "changes": NotRecorded("its effect is CameraChoice.linked"),
-        "behind": NotRecorded("recorded as CameraChoice.behind"),
-        "in_front": NotRecorded("recorded as CameraChoice.in_front"),
     },
     "SmoothingResult": {
         "orig_from_stab": NotRecorded("chooses the traced frames; shown as the smoothed trajectory"),

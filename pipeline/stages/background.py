@@ -26,6 +26,7 @@ a jump of the camera's motion by a fifth of the frame up to 8.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import functools
 import itertools
 from dataclasses import dataclass
@@ -73,6 +74,7 @@ class PairLayers:
     behind: tuple[int, ...] = ()
     in_front: tuple[int, ...] = ()
     changes: np.ndarray | None = None
+    carried: tuple[int, ...] = ()  # each motion's pairs tracked on since a motion of a pair's own was its layer
 
     @property
     def choosable(self) -> bool:
@@ -151,12 +153,7 @@ class CameraChoice:
     linked: float  # what the pairs around it added: their evidence, carried by the places and continuity
     behind: tuple[int, ...] = ()  # each motion's occlusion votes (px at ANALYSIS_SIDE): seen behind ...
     in_front: tuple[int, ...] = ()  # ... and seen in front
-
-
-def every_choice(layers: PairLayers) -> list[CameraChoice]:
-    """A choice taking each of the pair's motions in turn (a segment keeps what each would give)."""
-    return [CameraChoice(i, "one motion" if not layers.choosable else "joined later", 0.0, 0.0)
-            for i in range(len(layers.motions))]
+    carried: tuple[int, ...] = ()  # each motion's pairs tracked on (motion.continued; 0: measured in the pair)
 
 
 def decide(layers: Sequence[PairLayers], lag: int = LAG_PAIRS) -> list[CameraChoice]:
@@ -248,7 +245,7 @@ def layers_of(estimate, before, width: int, height: int) -> PairLayers:
     if estimate.status != "ok" or not estimate.others:
         return PairLayers((estimate.curr_from_prev,), changes=changes)
     return PairLayers(motions_of(estimate), links=place_links(before, estimate, max(width, height)),
-                      changes=changes)
+                      changes=changes, carried=(0, *(other.carried for other in estimate.others)))
 
 
 # -- occlusion --------------------------------------------------------------------------------------------------
@@ -529,7 +526,7 @@ def _explain(layers: PairLayers, taken: int, marginal: np.ndarray) -> CameraChoi
     occlusion = float(np.subtract(*layers.occlusion_scores()[[taken, rival]]))
     linked = float(marginal[taken] - marginal[rival]) - occlusion
     rule = "occlusion at this frame" if occlusion >= linked else "the frames around it"
-    return CameraChoice(taken, rule, occlusion, linked, layers.behind, layers.in_front)
+    return CameraChoice(taken, rule, occlusion, linked, layers.behind, layers.in_front, layers.carried)
 
 
 # -- the stream of pairs ------------------------------------------------------------------------------------------
@@ -571,4 +568,4 @@ class LayerEvidence:
 def _with_votes(estimate, layers: PairLayers, votes: Votes) -> tuple[object, PairLayers]:
     if not layers.choosable:
         return estimate, layers
-    return estimate, PairLayers(layers.motions, layers.links, votes.behind, votes.in_front, layers.changes)
+    return estimate, dataclasses.replace(layers, behind=votes.behind, in_front=votes.in_front)

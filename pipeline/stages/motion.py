@@ -24,8 +24,8 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
-from pipeline.stages.background import (LINK_RADIUS, LINK_TRACKS, SHARPNESS_RATIO, CameraChoice, at_one_sharpness,
-                                       gradient_energy, motions_of, track_ends, track_starts)
+from pipeline.stages.background import (SHARPNESS_RATIO, CameraChoice, at_one_sharpness, gradient_energy, motions_of,
+                                       track_ends)
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
@@ -37,6 +37,8 @@ LAYER_MODEL_MIN_TRACKS = 20  # a layer on fewer tracks keeps its similarity: mor
 MAX_OTHER_MOTIONS = 2  # motions looked for beside RANSAC's winner (the background and two figures, or three figures)
 ALTERNATIVE_MIN_SHIFT_PX = 6.0  # ... and kept when it moves the frame this much differently (working px): less is
 # depth (parallax between near and far layers of a walk), which the camera path must not jump between
+CARRIED_PAIRS = 10  # pairs in a row a layer no motion of the pair is goes on being tracked (``continued``): a third
+# of a second at 30 fps, longer than a sky behind figures goes without corners enough for a motion of its own
 MOTION_MODELS: tuple[str, ...] = ("affine", "similarity", "homography")
 REFINEMENTS: tuple[str, ...] = ("none", "ecc")
 
@@ -113,11 +115,13 @@ class MotionConfig:
 @dataclass(frozen=True)
 class OtherMotion:
     """A motion of the pair other than the camera's: a moving figure's, full-resolution curr_from_prev and the
-    tracks that follow it (full-resolution px, (M, 2) each)."""
+    tracks that follow it (full-resolution px, (M, 2) each). ``carried``: 0 for a motion of the pair's own tracks,
+    k for a layer of an earlier pair that no motion of the last k pairs was, tracked on (``continued``)."""
 
     curr_from_prev: np.ndarray
     prev_points: np.ndarray
     curr_points: np.ndarray
+    carried: int = 0
 
 
 @dataclass(frozen=True)
@@ -222,36 +226,88 @@ def estimate(prev: PreparedFrame, curr: PreparedFrame, config: MotionConfig) -> 
 
 def continued(before: MotionEstimate | None, estimate: MotionEstimate, previous: PreparedFrame | None,
               prepared: PreparedFrame, config: MotionConfig) -> MotionEstimate:
-    """``estimate`` with each layer of the pair before (``before``, as ``estimate`` returned it) that none of its
-    motions continues tracked on from that layer's track ends and fitted as another motion (``_carried``). Where a
-    layer leaves too few corners in a pair for the search among RANSAC's outliers (a sky behind three figures, a
-    motion-blurred frame), the camera's motion is otherwise missing there, and the chooser must follow a figure
-    across the pair. Only layers ``before`` measured are carried, so a pair's motions depend on the one pair before
-    it alone. A layer is continued where LINK_TRACKS / 2 of its ends have a track of this pair starting within
-    background.LINK_RADIUS."""
+    """``estimate`` with the layers of the pair before (``before``, as this function returned it) tracked on, so that
+    a layer keeps its tracks from pair to pair for as long as they track. Each layer's track ends are tracked into
+    this frame and fitted as one motion (``_carried``). Where a motion of the pair is that layer (the two move the
+    layer's tracks within ALTERNATIVE_MIN_SHIFT_PX of each other), the carried tracks join that motion's
+    (``_with_tracks_of``); where none is, the layer is added as another motion (at most MAX_OTHER_MOTIONS of them,
+    each for at most CARRIED_PAIRS pairs in a row). A layer that leaves few corners in each frame (a sky behind three
+    figures, a motion-blurred frame) has too few tracks in some pairs for the search among RANSAC's outliers, and its
+    motion is then missing there (the chooser must follow a figure across); kept, its tracks add up over the frames
+    it is seen in. Layers are only carried from a pair with several motions. A pair's motions so depend on the pairs
+    before it: pass 1 runs over the clip in order (pipeline/segments.py too)."""
     if before is None or previous is None or before.status != "ok" or estimate.status != "ok" or not before.others:
         return estimate
-    starts = np.concatenate(track_starts(estimate))
-    radius = LINK_RADIUS * max(prepared.width, prepared.height)
-    carried: list[OtherMotion] = []
-    for ends in track_ends(before):
-        if len(ends) < ALTERNATIVE_MIN_TRACKS or _continues(ends, starts, radius):
+    added: list[OtherMotion] = []
+    for ends, carried in zip(track_ends(before), (0, *(other.carried for other in before.others))):
+        if len(ends) < ALTERNATIVE_MIN_TRACKS or carried >= CARRIED_PAIRS:
             continue
         layer = _carried(ends, previous, prepared, config)
-        known = [*motions_of(estimate), *(other.curr_from_prev for other in carried)]
-        if layer is not None and min(corner_shift(layer.curr_from_prev, matrix, layer.prev_points)
-                                     for matrix in known) >= ALTERNATIVE_MIN_SHIFT_PX / prepared.scale:
-            carried.append(layer)
-    return dataclasses.replace(estimate, others=estimate.others + tuple(carried)) if carried else estimate
+        if layer is None:
+            continue
+        known = [*motions_of(estimate), *(other.curr_from_prev for other in added)]
+        shifts = [corner_shift(layer.curr_from_prev, matrix, layer.prev_points) for matrix in known]
+        same = int(np.argmin(shifts))
+        if shifts[same] >= ALTERNATIVE_MIN_SHIFT_PX / prepared.scale:
+            if len(added) < MAX_OTHER_MOTIONS:
+                added.append(dataclasses.replace(layer, carried=carried + 1))
+        elif same <= len(estimate.others):
+            estimate = _with_tracks_of(estimate, same, layer, prepared, config)
+    return dataclasses.replace(estimate, others=estimate.others + tuple(added)) if added else estimate
 
 
-def _continues(ends: np.ndarray, starts: np.ndarray, radius: float) -> bool:
-    if not len(starts):
-        return False
+def _with_tracks_of(estimate: MotionEstimate, index: int, layer: OtherMotion, prepared: PreparedFrame,
+                    config: MotionConfig) -> MotionEstimate:
+    """``estimate`` with the carried ``layer``'s tracks added to its motion ``index`` (0: RANSAC's winner), leaving
+    out those that start within corner_min_distance of one of the motion's own (the same corner). The winner keeps
+    its motion (its tracks were refined in a second pass) and takes the carried tracks it moves within RANSAC's
+    threshold; another motion (first-pass tracks only) is refitted to its tracks and the carried ones."""
+    own = estimate.prev_points[estimate.inliers] if index == 0 else estimate.others[index - 1].prev_points
+    new = _away_from(layer.prev_points, own, config.corner_min_distance / prepared.scale)
+    if not new.any():
+        return estimate
+    starts, ends = layer.prev_points[new], layer.curr_points[new]
+    if index == 0:
+        held = np.linalg.norm(geometry.apply(estimate.curr_from_prev, starts) - ends, axis=1) \
+            < config.ransac_threshold_px / prepared.scale
+        return dataclasses.replace(
+            estimate, prev_points=np.concatenate([estimate.prev_points, starts[held]]).astype(np.float32),
+            curr_points=np.concatenate([estimate.curr_points, ends[held]]).astype(np.float32),
+            inliers=np.concatenate([estimate.inliers, np.ones(int(held.sum()), bool)]),
+            n_tracked=estimate.n_tracked + int(held.sum()), n_inliers=estimate.n_inliers + int(held.sum()))
+    refitted = _refitted(estimate.others[index - 1], starts, ends, prepared.scale, config)
+    if refitted is None:
+        return estimate
+    others = list(estimate.others)
+    others[index - 1] = refitted
+    return dataclasses.replace(estimate, others=tuple(others))
+
+
+def _refitted(other: OtherMotion, starts: np.ndarray, ends: np.ndarray, scale: float,
+              config: MotionConfig) -> OtherMotion | None:
+    """``other`` refitted (``_refit``, at working size) to its tracks and the tracks ``starts`` -> ``ends`` (full px);
+    None where too few hold."""
+    prev_pts = (np.concatenate([other.prev_points, starts]) * scale).astype(np.float32)
+    curr_pts = (np.concatenate([other.curr_points, ends]) * scale).astype(np.float32)
+    seed = geometry.rescale_transform(other.curr_from_prev, 1.0 / scale)
+    model = config.model if len(prev_pts) >= LAYER_MODEL_MIN_TRACKS else "similarity"
+    matrix, mask = _refit(prev_pts, curr_pts, np.ones(len(prev_pts), bool),
+                          seed if config.model == "homography" else seed[:2], model, config.ransac_threshold_px)
+    if not _holds(matrix, mask, ALTERNATIVE_MIN_TRACKS):
+        return None
+    held = mask.ravel().astype(bool)
+    return OtherMotion(geometry.rescale_transform(geometry.to_3x3(matrix), scale), prev_pts[held] / scale,
+                       curr_pts[held] / scale)
+
+
+def _away_from(points: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
+    """(N,) bool: which ``points`` lie farther than ``radius`` from every one of ``others``."""
+    if not len(others):
+        return np.ones(len(points), bool)
     import scipy.spatial  # here: only pairs after one with several motions need it
 
-    distance, _ = scipy.spatial.cKDTree(starts).query(ends, k=1)
-    return int((distance <= radius).sum()) >= LINK_TRACKS / 2
+    distance, _ = scipy.spatial.cKDTree(others).query(points, k=1)
+    return distance > radius
 
 
 def _carried(ends: np.ndarray, previous: PreparedFrame, prepared: PreparedFrame,
