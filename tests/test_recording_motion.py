@@ -90,6 +90,26 @@ def test_each_pair_says_which_motion_the_camera_took_and_why(run):
     assert np.allclose(linked, [estimates[t].camera.linked for t in frames.tolist()])
 
 
+def test_the_rule_line_names_the_layers_tracked_on(tmp_path):
+    """Three figures over a sky: on pairs where a layer of an earlier pair was tracked on and added as a motion
+    (motion.continued), the camera's rule line says so of each such motion, with how many pairs."""
+    from pipeline.evaluation import foreground
+    from pipeline.runtime.source import ArraySource
+    from pipeline.stabilize import stabilize_source
+
+    video = foreground.clip("three figures", "rocket", 2, n_frames=30)
+    rrd = tmp_path / "sky.rrd"
+    collector = StageCollector("motion")
+    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="none"), workers=1,
+                     observer=Observers(RerunRecorder(rrd, level="full", jpeg_quality=None), collector))
+    lines = {t: text[0] for t, text in rows_at(Recording.load(rrd), ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
+    carried = {stamp.index: [k for k in e.camera.carried if k] for stamp, e in collector.results["motion"]}
+    assert any(carried.values()), "no layer was tracked on: the test shows nothing"
+    for t, counts in carried.items():
+        assert lines[t].count("tracked on") == len(counts)
+        assert all(f"tracked on {k} pair" in lines[t] for k in counts)
+
+
 def test_ignore_box_is_outlined_while_active(run):
     recording, _ = run
     logged = rows_at(recording, ent.MOTION_IGNORED, "LineStrips2D:strips")
