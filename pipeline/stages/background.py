@@ -207,10 +207,17 @@ def _held_by_none(estimate) -> np.ndarray:
     held = [other.curr_points for other in estimate.others if len(other.curr_points)]
     if not len(outliers) or not held:
         return outliers
-    import scipy.spatial
+    return outliers[away_from(outliers, np.concatenate(held), 1.0)]
 
-    distance, _ = scipy.spatial.cKDTree(np.concatenate(held)).query(outliers, k=1)
-    return outliers[distance > 1.0]
+
+def away_from(points: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
+    """(N,) bool: which ``points`` lie farther than ``radius`` from every one of ``others``."""
+    if not len(others):
+        return np.ones(len(points), bool)
+    import scipy.spatial  # here: only pairs with several motions need it
+
+    distance, _ = scipy.spatial.cKDTree(others).query(points, k=1)
+    return distance > radius
 
 
 def motions_of(estimate) -> tuple[np.ndarray, ...]:

@@ -24,8 +24,8 @@ import numpy as np
 
 from pipeline import geometry
 from pipeline.errors import ConfigError
-from pipeline.stages.background import (SHARPNESS_RATIO, CameraChoice, at_one_sharpness, gradient_energy, motions_of,
-                                       track_ends)
+from pipeline.stages.background import (SHARPNESS_RATIO, CameraChoice, at_one_sharpness, away_from, gradient_energy,
+                                       motions_of, track_ends)
 
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
@@ -263,7 +263,7 @@ def _with_tracks_of(estimate: MotionEstimate, index: int, layer: OtherMotion, pr
     its motion (its tracks were refined in a second pass) and takes the carried tracks it moves within RANSAC's
     threshold; another motion (first-pass tracks only) is refitted to its tracks and the carried ones."""
     own = estimate.prev_points[estimate.inliers] if index == 0 else estimate.others[index - 1].prev_points
-    new = _away_from(layer.prev_points, own, config.corner_min_distance / prepared.scale)
+    new = away_from(layer.prev_points, own, config.corner_min_distance / prepared.scale)
     if not new.any():
         return estimate
     starts, ends = layer.prev_points[new], layer.curr_points[new]
@@ -298,16 +298,6 @@ def _refitted(other: OtherMotion, starts: np.ndarray, ends: np.ndarray, scale: f
     held = mask.ravel().astype(bool)
     return OtherMotion(geometry.rescale_transform(geometry.to_3x3(matrix), scale), prev_pts[held] / scale,
                        curr_pts[held] / scale)
-
-
-def _away_from(points: np.ndarray, others: np.ndarray, radius: float) -> np.ndarray:
-    """(N,) bool: which ``points`` lie farther than ``radius`` from every one of ``others``."""
-    if not len(others):
-        return np.ones(len(points), bool)
-    import scipy.spatial  # here: only pairs after one with several motions need it
-
-    distance, _ = scipy.spatial.cKDTree(others).query(points, k=1)
-    return distance > radius
 
 
 def _carried(ends: np.ndarray, previous: PreparedFrame, prepared: PreparedFrame,
