@@ -58,14 +58,17 @@ def test_a_figure_covering_sixty_percent_shakes_the_view_no_more_than_a_small_on
     assert_within_the_bound("60% fast", "rocket", seed, least_share=0.55)
 
 
-@pytest.mark.parametrize("image, seed", [("coffee", 0), ("chelsea", 1), ("coffee", 9), ("rocket", 1), ("chelsea", 2)])
+@pytest.mark.parametrize("image, seed", [("coffee", 0), ("chelsea", 1), ("coffee", 9), ("rocket", 1), ("chelsea", 2),
+                                         ("rocket", 19), ("rocket", 26)])
 def test_a_half_frame_figure_with_blurred_frames_shakes_the_view_no_more_than_a_small_one(image, seed):
     """A figure covering half the frame, every third frame motion-blurred: a pair between a blurred and a sharp frame
     is also tracked at one sharpness (motion._with_matched_sharpness), from the sharper frame's corners too, or its
     few background corners drift and neither of its motions is the camera's (one pair 16 px off on the first,
     several on the second; on the third, a pair from a blurred frame 12 px off with prev's corners alone; on the
     fourth, a sky, a few of whose corners a similarity fitted among the outliers joined to a figure's; on the
-    fifth, a pair where neither fit held the background, which the pair before's tracks carry on: motion.continued)."""
+    fifth, a pair where neither fit held the background, which the pair before's tracks carry on: motion.continued;
+    on the last two, a background fitted as an affine to 20-33 first-pass tracks over part of the frame, 2-30 px off
+    at its corners where a similarity is within 2: motion.LAYER_MODEL_MIN_TRACKS)."""
     assert_within_the_bound("half, blurred", image, seed, least_share=0.45)
 
 
@@ -122,8 +125,9 @@ def test_another_layer_is_one_group_of_tracks_not_two_far_apart():
     curr = np.concatenate([geometry.apply(figure_motion, figure), geometry.apply(camera, sky)]).astype(np.float32)
     cv2.setRNGSeed(0)
     joined, mask = motion._fit_model(prev, curr, motion.MotionConfig())
-    assert mask.all() and min(geometry.corner_error(geometry.to_3x3(joined), t, 640, 360)
-                              for t in (figure_motion, camera)) > 5.0
+    held = mask.ravel().astype(bool)
+    assert held[:18].any() and held[18:].any() and min(geometry.corner_error(geometry.to_3x3(joined), t, 640, 360)
+                                                       for t in (figure_motion, camera)) > 5.0
     for model in motion.MOTION_MODELS:
         beside, mask = motion._fit_beside(prev, curr, shift(6.0, -2.0), motion.MotionConfig(model=model))
         assert geometry.corner_error(geometry.to_3x3(beside), figure_motion, 640, 360) < 0.1, model
