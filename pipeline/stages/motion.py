@@ -34,8 +34,8 @@ RANSAC_SEED = 0x5EED
 ALTERNATIVE_MIN_SHARE = 0.10
 ALTERNATIVE_MIN_TRACKS = 6  # ... and at least this many
 LAYER_MODEL_MIN_TRACKS = 40  # a layer fitted on fewer tracks (first-pass ones: LK's loose pass, drift across a blur)
-# keeps its similarity: an affine's two more parameters follow those tracks' errors, and over the part of the frame
-# they cover that moves its far corners px off the camera's motion (docs/decisions.md D46)
+# keeps its similarity: an affine's two more parameters follow those tracks' errors, and from the part of the frame
+# the tracks cover they carry the frame's far corners px off the camera's motion (docs/decisions.md D46)
 MAX_OTHER_MOTIONS = 2  # motions looked for beside RANSAC's winner (the background and two figures, or three figures)
 ALTERNATIVE_MIN_SHIFT_PX = 6.0  # ... and kept when it moves the frame this much differently (working px): less is
 # depth (parallax between near and far layers of a walk), which the camera path must not jump between
