@@ -292,7 +292,7 @@ def _refitted(other: OtherMotion, starts: np.ndarray, ends: np.ndarray, scale: f
     prev_pts = (np.concatenate([other.prev_points, starts]) * scale).astype(np.float32)
     curr_pts = (np.concatenate([other.curr_points, ends]) * scale).astype(np.float32)
     seed = geometry.rescale_transform(other.curr_from_prev, 1.0 / scale)
-    model = config.model if len(prev_pts) >= LAYER_MODEL_MIN_TRACKS else "similarity"
+    model = _layer_model(config.model, len(prev_pts))
     matrix, mask = _refit(prev_pts, curr_pts, np.ones(len(prev_pts), bool),
                           seed if config.model == "homography" else seed[:2], model, config.ransac_threshold_px)
     if not _holds(matrix, mask, ALTERNATIVE_MIN_TRACKS):
@@ -629,7 +629,7 @@ def _fit_layer(prev_pts: np.ndarray, curr_pts: np.ndarray, config: MotionConfig,
     each within the threshold); a similarity cannot."""
     seed, mask = cv2.estimateAffinePartial2D(prev_pts, curr_pts, method=cv2.RANSAC, ransacReprojThreshold=threshold,
                                              maxIters=2000, confidence=0.995, refineIters=20)
-    if seed is None or mask is None or int(mask.sum()) < LAYER_MODEL_MIN_TRACKS:
+    if seed is None or mask is None or _layer_model(config.model, int(mask.sum())) == "similarity":
         return seed, mask
     return _refit(prev_pts, curr_pts, mask.ravel().astype(bool), seed, config.model, threshold)
 
@@ -648,8 +648,14 @@ def _fit_beside(prev_pts: np.ndarray, curr_pts: np.ndarray, first: np.ndarray, c
     shifted = geometry.to_3x3(first).copy()
     shifted[:2] += np.outer(np.median(steps[members], axis=0), shifted[2])
     seed = shifted if config.model == "homography" else shifted[:2]
-    model = config.model if int(members.sum()) >= LAYER_MODEL_MIN_TRACKS else "similarity"
+    model = _layer_model(config.model, int(members.sum()))
     return _refit(prev_pts, curr_pts, members, seed, model, threshold)
+
+
+def _layer_model(model: str, n_tracks: int) -> str:
+    """The model a layer on ``n_tracks`` first-pass tracks is fitted with: the configured one from
+    LAYER_MODEL_MIN_TRACKS tracks on, a similarity below."""
+    return model if n_tracks >= LAYER_MODEL_MIN_TRACKS else "similarity"
 
 
 def _refit(prev_pts: np.ndarray, curr_pts: np.ndarray, members: np.ndarray, seed: np.ndarray, model: str,
