@@ -81,12 +81,13 @@ def test_three_figures_walking_their_own_ways_do_not_pull_the_camera():
     assert chosen.figure_share > 0.55 and chosen.wrong_pairs <= 2 and chosen.px <= 1.5 * small.px
 
 
-@pytest.mark.parametrize("seed", [5, 7])
+@pytest.mark.parametrize("seed", [5, 7, 10, 28])
 def test_three_figures_over_a_sky_do_not_pull_the_camera(seed):
     """Three figures dressed in the photograph walk over a sky that leaves the background few corners in a frame: each
-    layer's tracks are carried from pair to pair (motion.continued), so the background's motion is among each pair's
-    where its own corners there are too few for the search among the outliers, and the chain does not follow a
-    figure across such a pair; the residual shake within 1.5x of the small-figure scene's, in full and crop mode."""
+    layer's tracks are carried from pair to pair (motion.continued), and beside two large layers a third needs few
+    tracks, so the background's motion is among each pair's where its corners are too few for a tenth of the tracks,
+    and the chain does not follow a figure across such a pair; the residual shake within 1.5x of the small-figure
+    scene's, in full and crop mode."""
     assert_within_the_bound("three figures", "rocket", seed, least_share=0.5)
 
 
@@ -133,6 +134,28 @@ def test_another_layer_is_one_group_of_tracks_not_two_far_apart():
         beside, mask = motion._fit_beside(prev, curr, shift(6.0, -2.0), motion.MotionConfig(model=model))
         assert geometry.corner_error(geometry.to_3x3(beside), figure_motion, 640, 360) < 0.1, model
         assert mask.ravel().tolist() == [1] * 18 + [0] * 8, model
+
+
+def test_a_few_tracks_of_their_own_are_a_motion_only_beside_two_large_layers():
+    """A layer of a few tracks (a thirtieth of them, spread over the frame's top) is another motion of the pair where
+    two large layers hold the rest (figures in front of a sky, the winner perhaps one of them), and none beside one
+    large layer (a small or near object beside the scene)."""
+    rng = np.random.default_rng(2)
+    scene, few = rng.uniform([0, 120], [640, 360], (190, 2)), rng.uniform([20, 10], [620, 60], (10, 2))
+    figure = rng.uniform([200, 100], [440, 360], (100, 2))
+    config = motion.MotionConfig(model="similarity")
+
+    def others(groups):
+        prev = np.concatenate([points for points, _ in groups]).astype(np.float32)
+        curr = np.concatenate([geometry.apply(m, points) for points, m in groups]).astype(np.float32)
+        inliers = np.arange(len(prev)) < len(groups[0][0])
+        cv2.setRNGSeed(0)
+        return [matrix for matrix, _ in motion._other_motions(prev, curr, inliers, groups[0][1], config)]
+
+    camera = shift(-4.0, 1.0)
+    beside_two = others([(scene, shift(9.0, -3.0)), (figure, shift(-15.0, 2.0)), (few, camera)])
+    assert min(geometry.corner_error(m, camera, 640, 360) for m in beside_two) < 0.1
+    assert others([(scene, shift(9.0, -3.0)), (few, camera)]) == []
 
 
 def test_a_fit_turned_round_is_the_fit_of_the_pair_the_other_way():

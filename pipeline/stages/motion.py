@@ -30,9 +30,10 @@ from pipeline.stages.background import (SHARPNESS_RATIO, CameraChoice, at_one_sh
 MotionModel = Literal["affine", "similarity", "homography"]
 Refinement = Literal["none", "ecc"]
 RANSAC_SEED = 0x5EED
-# Another motion is looked for among RANSAC's outliers when they are at least this share of the tracks ...
+# A second motion among RANSAC's outliers needs this share of the tracks: beside one large layer a few tracks moving
+# their own way are a small or near object's (cars behind a railing, a cushion near the lens), not the camera's ...
 ALTERNATIVE_MIN_SHARE = 0.10
-ALTERNATIVE_MIN_TRACKS = 6  # ... and at least this many
+ALTERNATIVE_MIN_TRACKS = 6  # ... and every motion at least this many (a third, beside two large layers, no more)
 LAYER_MODEL_MIN_TRACKS = 40  # a layer fitted on fewer tracks (first-pass ones: LK's loose pass, drift across a blur)
 # keeps its similarity: an affine's two more parameters follow those tracks' errors, and from the part of the frame
 # the tracks cover they carry the frame's far corners px off the camera's motion (docs/decisions.md D46)
@@ -496,13 +497,19 @@ def _other_motions(prev_pts: np.ndarray, curr_pts: np.ndarray, inliers: np.ndarr
     """Up to MAX_OTHER_MOTIONS further motions among the first fit's outliers, one after another (each among what
     the ones before left; ``_next_motion``): RANSAC keeps the motion most tracks agree on, which is a large textured
     figure's once it holds more tracks than the background, and where several figures walk each moves its own way;
-    a background of sky leaves the camera's motion few tracks. A motion needs ALTERNATIVE_MIN_SHARE of the tracks
-    (at least ALTERNATIVE_MIN_TRACKS) and must move the frame at least ALTERNATIVE_MIN_SHIFT_PX differently from each
-    found before. (matrix, its tracks' indices) each, working px."""
-    needed = max(ALTERNATIVE_MIN_TRACKS, int(ALTERNATIVE_MIN_SHARE * len(inliers)))
+    a background of sky leaves the camera's motion few tracks. Each motion must move the frame at least
+    ALTERNATIVE_MIN_SHIFT_PX differently from each found before. The first other needs ALTERNATIVE_MIN_SHARE of the
+    tracks: beside one large layer, a few tracks of their own are a small or near object's. Once a second large layer
+    shows that large figures move in the frame, and the winner may be one of them, a further motion needs only
+    ALTERNATIVE_MIN_TRACKS: a background of sky behind them holds few. (matrix, its tracks' indices) each, working
+    px."""
+    share = max(ALTERNATIVE_MIN_TRACKS, int(ALTERNATIVE_MIN_SHARE * len(inliers)))
     left = ~inliers
     found: list[tuple[np.ndarray, np.ndarray]] = []
-    while len(found) < MAX_OTHER_MOTIONS and left.sum() >= needed:
+    while len(found) < MAX_OTHER_MOTIONS:
+        needed = ALTERNATIVE_MIN_TRACKS if found else share
+        if left.sum() < needed:
+            break
         taken, aside = _next_motion(prev_pts, curr_pts, np.flatnonzero(left), [first, *(f[0] for f in found)],
                                     config, needed)
         if taken is not None:
