@@ -19,8 +19,8 @@ programming (Viterbi) with a bounded look-ahead: pairs are decided `LAG_PAIRS` a
 after it are known, with the pair before them fixed as decided. So a pair with no evidence of its own follows the
 pairs linked to it, a run of pairs with misleading evidence is outvoted by the linked pairs around it, and memory
 does not grow with the clip. Where there is no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear
-occlusion is worth up to 3 (half to each pair around the frame it is seen at), leaving a layer a sure link follows 20,
-a jump of the camera's motion by a fifth of the frame up to 8.
+occlusion is worth up to 3 (half to each pair around the frame it is seen at), leaving a layer a sure link follows 20
+(4 from a layer lost for the pair), a jump of the camera's motion by a fifth of the frame up to 8.
 """
 
 from __future__ import annotations
@@ -54,6 +54,8 @@ CONTINUITY_FREE = 2.0  # shakes: a change of the camera's motion within this man
 CONTINUITY_CAP = 8.0  # log-odds: the most a change of motion between pairs costs
 WINNER_PRIOR = 1.5  # log-odds for the motion most tracks follow, once a chain of linked pairs
 LINK_GAIN = 20.0  # log-odds against leaving a layer whose tracks all start where one motion of the pair before ended
+LAYER_LOST = 4.0  # log-odds at most against entering such a layer from one no motion of the pair goes on: a layer can
+# be lost for a pair (a sky behind figures leaves the camera's motion no tracks), and its chain must go on somewhere
 LINK_RADIUS = 0.02  # of the frame's long side: a track start farther from every end of the pair before is not linked
 SAME_LAYER = 0.8  # sameness (0..1) above which the occlusion test takes two motions of consecutive pairs for one layer
 LINK_TRACKS = 8  # a link rests on the tracks that are linked; fewer than this count for what they are
@@ -128,14 +130,20 @@ class PairLayers:
         surest matching without it): two figures that split or merge leave their own match in doubt, not the
         background's. Staying on a layer scores 0 whichever layer it is, however many tracks hold it or however
         cleanly it links, so the links carry which layer is which and the evidence alone says which layer is the
-        camera's."""
+        camera's. A motion of the pair before that no motion of this pair goes on (its layer lost: a background of
+        sky behind figures can leave the camera's motion no tracks for a pair) costs at most LAYER_LOST to leave
+        for a matched layer, not a sure link's LINK_GAIN: whichever motion its chain takes next it must switch, and
+        that is no evidence it was not the camera's; a lost layer is still no free way out of a wrong chain."""
         gain = LINK_GAIN * _link_confidence(self.links)
         scores = np.zeros((self.links.shape[0] - 1, len(self.motions)))
         matched = _matching(_sameness(self.links))
+        going_on = [i for i, _, _ in matched]
+        lost = np.setdiff1d(np.arange(scores.shape[0]), going_on)
         for i, j, margin in matched:
             leaving = -gain * min(margin, 1.0)
             scores[i, :] = np.minimum(scores[i, :], leaving)
-            scores[:, j] = np.minimum(scores[:, j], leaving)
+            scores[going_on, j] = np.minimum(scores[going_on, j], leaving)
+            scores[lost, j] = np.minimum(scores[lost, j], leaving * LAYER_LOST / LINK_GAIN)
         for i, j, _ in matched:
             scores[i, j] = 0.0
         return scores
