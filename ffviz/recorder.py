@@ -351,6 +351,8 @@ class RerunRecorder:
                               for b, f, k in zip(choice.behind, choice.in_front, carried))
             line = (f"camera: {taken}; decided by {choice.rule} (log-odds for it: occlusion {choice.occlusion:+.1f}, "
                     f"the frames around it {choice.linked:+.1f}; occlusion px of each motion: {votes})")
+            if choice.lost:
+                line += "; the camera's layer of the frame before goes on as no motion here (lost): a switch of layer"
         self._columns.add(ent.MOTION_CAMERA_RULE, Row(rr.TextLog, {"text": line}), stamp.index, stamp.time_s)
 
     def _on_ignored(self, ignored: np.ndarray | None) -> None:

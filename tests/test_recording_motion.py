@@ -110,6 +110,24 @@ def test_the_rule_line_names_the_layers_tracked_on(tmp_path):
         assert all(f"tracked on {k} pair" in lines[t] for k in counts)
 
 
+def test_the_rule_line_says_where_the_cameras_layer_was_lost(tmp_path):
+    """Three figures over a sky, seed 13: at a pair where no motion goes on the camera's layer of the pair before
+    (background.PairLayers.lost), the chain had to switch layer, and the camera's rule line says so there only."""
+    from pipeline.evaluation import foreground
+    from pipeline.runtime.source import ArraySource
+    from pipeline.stabilize import stabilize_source
+
+    video = foreground.clip("three figures", "rocket", 13, n_frames=40)
+    rrd = tmp_path / "lost.rrd"
+    collector = StageCollector("motion")
+    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="none"), workers=1,
+                     observer=Observers(RerunRecorder(rrd, level="full", jpeg_quality=None), collector))
+    lines = {t: text[0] for t, text in rows_at(Recording.load(rrd), ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
+    lost = [stamp.index for stamp, e in collector.results["motion"] if e.camera.lost]
+    assert lost, "no layer was lost: the test shows nothing"
+    assert [t for t, line in sorted(lines.items()) if "(lost)" in line] == lost
+
+
 def test_ignore_box_is_outlined_while_active(run):
     recording, _ = run
     logged = rows_at(recording, ent.MOTION_IGNORED, "LineStrips2D:strips")

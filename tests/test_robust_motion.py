@@ -355,8 +355,9 @@ def test_a_background_lost_for_a_pair_does_not_hand_the_chain_to_a_figure():
     pairs[42] = background.PairLayers((I3, I3), None, (0, 0), (0, 0))
     for t in (*range(5, 36, 5), 50, 60, 70):
         seen_at(pairs, t, (0, 120))
-    taken = [c.taken for c in background.decide(pairs)]
-    assert taken[1:40] == [1] * 39 and taken[42:] == [1] * 38
+    choices = background.decide(pairs)
+    assert [c.taken for c in choices[1:40]] == [1] * 39 and [c.taken for c in choices[42:]] == [1] * 38
+    assert [t for t, c in enumerate(choices) if c.lost] == [40]  # the debugger's rule line says so there
 
 
 def test_a_lost_layer_is_no_free_way_out_of_a_wrong_chain():

@@ -122,6 +122,16 @@ class PairLayers:
             scores = scores - np.minimum(0.5 * beyond ** 2, CONTINUITY_CAP)
         return scores
 
+    @functools.cached_property
+    def _matched(self) -> list[tuple[int, int, float]]:
+        return _matching(_sameness(self.links))
+
+    def lost(self, before: int) -> bool:
+        """Whether motion ``before`` of the pair before goes on as no motion of this pair (its layer lost here);
+        False where no links relate the two pairs."""
+        return self.links is not None and before < self.links.shape[0] - 1 and \
+            all(i != before for i, _, _ in self._matched)
+
     def _link_scores(self) -> np.ndarray:
         """(n_before, n): the score of each pair of states (motion i of the pair before the camera's, motion j of
         this pair) from the links: 0 where i and j are one layer by the best matching of the two pairs' motions, -w
@@ -136,7 +146,7 @@ class PairLayers:
         that is no evidence it was not the camera's; a lost layer is still no free way out of a wrong chain."""
         gain = LINK_GAIN * _link_confidence(self.links)
         scores = np.zeros((self.links.shape[0] - 1, len(self.motions)))
-        matched = _matching(_sameness(self.links))
+        matched = self._matched
         going_on = [i for i, _, _ in matched]
         lost = np.setdiff1d(np.arange(scores.shape[0]), going_on)
         for i, j, margin in matched:
@@ -162,6 +172,7 @@ class CameraChoice:
     behind: tuple[int, ...] = ()  # each motion's occlusion votes (px at ANALYSIS_SIDE): seen behind ...
     in_front: tuple[int, ...] = ()  # ... and seen in front
     carried: tuple[int, ...] = ()  # each motion's pairs tracked on (motion.continued; 0: measured in the pair)
+    lost: bool = False  # the camera's layer of the pair before goes on as no motion of this pair: its chain switched
 
 
 def decide(layers: Sequence[PairLayers], lag: int = LAG_PAIRS) -> list[CameraChoice]:
@@ -492,13 +503,13 @@ class CameraChooser:
         for pointers in reversed(back_pointers):
             states.append(int(pointers[states[-1]]))
         states.reverse()
-        decided = [(layers, _explain(layers, state, forward[k] + backward[k]))
+        before = [None if self.before is None else self.before[1], *states[:count - 1]]
+        decided = [(layers, _explain(layers, state, forward[k] + backward[k],
+                                     before[k] is not None and layers.lost(before[k])))
                    for k, (layers, state) in enumerate(zip(self.pending[:count], states))]
-        previous = None if self.before is None else self.before[1]
-        for layers, state in zip(self.pending[:count], states):
+        for layers, state, previous in zip(self.pending[:count], states, before):
             if layers.changes is not None and previous is not None and previous < layers.changes.shape[0]:
                 self.changes.append(float(layers.changes[previous, state]))
-            previous = state
         self.before = (len(self.pending[count - 1].motions), states[count - 1])
         del self.pending[:count]
         return decided
@@ -532,16 +543,16 @@ def _backward(chain: list[PairLayers], shake: float) -> list[np.ndarray]:
     return scores[::-1]
 
 
-def _explain(layers: PairLayers, taken: int, marginal: np.ndarray) -> CameraChoice:
+def _explain(layers: PairLayers, taken: int, marginal: np.ndarray, lost: bool = False) -> CameraChoice:
     """The choice with what weighed most for it against the best other motion: the pair's own occlusion evidence,
-    or the pairs around it."""
+    or the pairs around it; ``lost``: the camera's layer of the pair before goes on as no motion of this pair."""
     if not layers.choosable:
         return CameraChoice(taken, "one motion", 0.0, 0.0)
     rival = int(np.argmax(np.where(np.arange(len(marginal)) == taken, -np.inf, marginal)))
     occlusion = float(np.subtract(*layers.occlusion_scores()[[taken, rival]]))
     linked = float(marginal[taken] - marginal[rival]) - occlusion
     rule = "occlusion at this frame" if occlusion >= linked else "the frames around it"
-    return CameraChoice(taken, rule, occlusion, linked, layers.behind, layers.in_front, layers.carried)
+    return CameraChoice(taken, rule, occlusion, linked, layers.behind, layers.in_front, layers.carried, lost)
 
 
 # -- the stream of pairs ------------------------------------------------------------------------------------------
