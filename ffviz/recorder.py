@@ -296,6 +296,9 @@ class RerunRecorder:
         self._columns.add(ent.MOTION_STATUS, Row(rr.TextLog, {"text": estimate.status}), stamp.index, stamp.time_s)
         if self.level == "full" and len(estimate.curr_points):
             self._features(estimate)
+        elif self.level == "full":  # no tracks of the camera's (none found, or its layer lost): none of the frame before
+            for child in ("points", "arrows"):
+                self.rec.log(f"{ent.MOTION_FEATURES}/{child}", rr.Clear(recursive=False))
         self._on_foreground(estimate)
         self._on_camera_choice(stamp, estimate)
         self._on_ignored(estimate.ignored)

@@ -346,8 +346,9 @@ def one_to_one(n: int) -> np.ndarray:
 
 def test_a_background_lost_for_a_pair_does_not_hand_the_chain_to_a_figure():
     """The background (the second motion) is seen behind at seven frames; at pair 40 its tracks are gone (a sky behind
-    figures) and both motions there go on the two figures of the pair before, then one motion only. Its chain must
-    switch to a figure for that pair: a layer lost costs LAYER_LOST, not a sure link's 20, so it stays the camera."""
+    figures) and both motions there go on the two figures of the pair before, then one motion only (taken: one motion
+    found is the camera's). The chain takes none of the motions at 40 (NONE_OF_THEM) rather than pay a sure link's
+    20 to switch to a figure, so it stays on the background before and after."""
     three = background.PairLayers((I3, I3, I3), one_to_one(3), (0, 0, 0), (0, 0, 0))
     pairs = chain(80)
     pairs[39] = dataclasses.replace(three, links=np.array([[10.0, 0, 0], [0, 10.0, 0], [0, 0, 0]]))
@@ -358,6 +359,7 @@ def test_a_background_lost_for_a_pair_does_not_hand_the_chain_to_a_figure():
         seen_at(pairs, t, (0, 120))
     choices = background.decide(pairs)
     assert [c.taken for c in choices[1:40]] == [1] * 39 and [c.taken for c in choices[42:]] == [1] * 38
+    assert choices[40].taken == -1
     assert [t for t, c in enumerate(choices) if c.lost] == [40]  # the debugger's rule line says so there
 
 

@@ -13,14 +13,16 @@ decides, over the clip rather than pair by pair, which one the camera's is (docs
 - **Continuity** (`motion_changes`): the camera's motion changes from one frame to the next about as much as the
   clip's shake makes it change elsewhere (`CameraChooser.shake`); a figure's own velocity comes on top of it.
 
-Each pair is a node of a chain with one state per motion ("this one is the camera's"), its occlusion evidence a
-score per state, places and continuity a score per pair of states; `CameraChooser` finds the best states by dynamic
-programming (Viterbi) with a bounded look-ahead: pairs are decided `LAG_PAIRS` at a time, each once at least as many
-after it are known, with the pair before them fixed as decided. So a pair with no evidence of its own follows the
-pairs linked to it, a run of pairs with misleading evidence is outvoted by the linked pairs around it, and memory
-does not grow with the clip. Where there is no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear
-occlusion is worth up to 3 (half to each pair around the frame it is seen at), leaving a layer a sure link follows 20
-(4 from a layer lost for the pair), a jump of the camera's motion by a fifth of the frame up to 8.
+Each pair is a node of a chain with one state per motion ("this one is the camera's") and one for none of them
+(entered only where the camera's layer is lost: no motion of the pair goes on it; its motion is then carried across
+by the layers that do, `carried_through`), its occlusion evidence a score per state, places and continuity a score
+per pair of states; `CameraChooser` finds the best states by dynamic programming (Viterbi) with a bounded look-ahead:
+pairs are decided `LAG_PAIRS` at a time, each once at least as many after it are known, with the pair before them
+fixed as decided. So a pair with no evidence of its own follows the pairs linked to it, a run of pairs with
+misleading evidence is outvoted by the linked pairs around it, and memory does not grow with the clip. Where there is
+no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear occlusion is worth up to 3 (half to each pair
+around the frame it is seen at), leaving a layer a sure link follows 20 (none of the motions, entered from a layer
+lost, 1 a pair), a jump of the camera's motion by a fifth of the frame up to 8.
 """
 
 from __future__ import annotations
@@ -54,9 +56,8 @@ CONTINUITY_FREE = 2.0  # shakes: a change of the camera's motion within this man
 CONTINUITY_CAP = 8.0  # log-odds: the most a change of motion between pairs costs
 WINNER_PRIOR = 1.5  # log-odds for the motion most tracks follow, once a chain of linked pairs
 LINK_GAIN = 20.0  # log-odds against leaving a layer whose tracks all start where one motion of the pair before ended
-LAYER_LOST = 4.0  # log-odds at most against entering such a layer from one no motion of the pair goes on: a layer can
-# be lost for a pair (a sky behind figures leaves the camera's motion no tracks), and its chain must go on somewhere
-NONE_OF_THEM = 1.0  # log-odds a pair against "none of the pair's motions is the camera's", entered from a lost layer
+NONE_OF_THEM = 1.0  # log-odds a pair against "none of the pair's motions is the camera's", entered from a layer lost
+# there (a sky behind figures can leave the camera's motion no tracks for a few pairs)
 LINK_RADIUS = 0.02  # of the frame's long side: a track start farther from every end of the pair before is not linked
 SAME_LAYER = 0.8  # sameness (0..1) above which the occlusion test takes two motions of consecutive pairs for one layer
 LINK_TRACKS = 8  # a link rests on the tracks that are linked; fewer than this count for what they are
@@ -175,17 +176,12 @@ class PairLayers:
         surest matching without it): two figures that split or merge leave their own match in doubt, not the
         background's. Staying on a layer scores 0 whichever layer it is, however many tracks hold it or however
         cleanly it links, so the links carry which layer is which and the evidence alone says which layer is the
-        camera's. A motion of the pair before that no motion of this pair goes on (its layer lost: a background of
-        sky behind figures can leave the camera's motion no tracks for a pair) costs at most LAYER_LOST to leave
-        for a matched layer, not a sure link's LINK_GAIN: whichever motion its chain takes next it must switch, and
-        that is no evidence it was not the camera's; a lost layer is still no free way out of a wrong chain."""
+        camera's. (A layer no motion of this pair goes on may be left for the state "none of them":
+        ``transition_scores``.)"""
         gain = LINK_GAIN * _link_confidence(self.links)
-        scores = np.zeros((self.links.shape[0] - 1, len(self.motions)))
-        going_on = [i for i, _, _ in self._matched]
+        scores = np.zeros((self.links.shape[0] - 1, len(self.motions))) + self._entering[None, :]
         for i, _, margin in self._matched:
-            scores[i, :] = -gain * min(margin, 1.0)
-        scores[going_on, :] = np.minimum(scores[going_on, :], self._entering)
-        scores[np.setdiff1d(np.arange(scores.shape[0]), going_on), :] = self._entering * LAYER_LOST / LINK_GAIN
+            scores[i, :] = np.minimum(scores[i, :], -gain * min(margin, 1.0))
         for i, j, _ in self._matched:
             scores[i, j] = 0.0
         return scores
@@ -528,7 +524,8 @@ class CameraChooser:
 
     def _decide(self, count: int) -> list[tuple[PairLayers, CameraChoice]]:
         """Decide the first ``count`` waiting pairs: the best chain's states (Viterbi's backtrack), explained by
-        each pair's max-marginals (the best chain's score with the pair in each state)."""
+        each pair's max-marginals (the best chain's score with the pair in each state); where the state is none of
+        the motions, the camera's motion carried across from the pair before's (``carried_through``)."""
         shake = self.shake
         forward, back_pointers = _forward(self.pending, None if self.before is None else
                                           (len(self.before[0].motions), self.before[1]), shake)
