@@ -296,7 +296,7 @@ class RerunRecorder:
         self._columns.add(ent.MOTION_STATUS, Row(rr.TextLog, {"text": estimate.status}), stamp.index, stamp.time_s)
         if self.level == "full" and len(estimate.curr_points):
             self._features(estimate)
-        elif self.level == "full":  # no tracks of the camera's (none found, or its layer lost): none of the frame before
+        elif self.level == "full":  # no tracks (none found): none left from the frame before
             for child in ("points", "arrows"):
                 self.rec.log(f"{ent.MOTION_FEATURES}/{child}", rr.Clear(recursive=False))
         self._on_foreground(estimate)
@@ -347,21 +347,14 @@ class RerunRecorder:
             line = "one motion found: the camera's"
         else:
             count = len(choice.behind)
+            taken = f"motion {choice.taken + 1} of {count} ({'RANSAC' if choice.taken == 0 else 'another'}'s; " \
+                    "orange: the others')"
             carried = choice.carried or (0,) * count
             votes = ", ".join(f"{b} behind/{f} in front" + (f" (tracked on {k} pair{'s' * (k > 1)})" if k else "")
                               for b, f, k in zip(choice.behind, choice.in_front, carried))
-            if choice.taken < 0:
-                line = (f"camera: none of the {len(estimate.others)} motions (orange), its layer lost: its motion "
-                        "carried across by "
-                        f"the layers that go on (log-odds for it: the frames around it {choice.linked:+.1f}; "
-                        f"occlusion px of each motion: {votes})")
-            else:
-                taken = f"motion {choice.taken + 1} of {count} ({'RANSAC' if choice.taken == 0 else 'another'}'s; " \
-                        "orange: the others')"
-                line = (f"camera: {taken}; decided by {choice.rule} (log-odds for it: occlusion "
-                        f"{choice.occlusion:+.1f}, the frames around it {choice.linked:+.1f}; occlusion px of each "
-                        f"motion: {votes})")
-            if choice.lost and choice.taken >= 0:
+            line = (f"camera: {taken}; decided by {choice.rule} (log-odds for it: occlusion {choice.occlusion:+.1f}, "
+                    f"the frames around it {choice.linked:+.1f}; occlusion px of each motion: {votes})")
+            if choice.lost:
                 line += "; the camera's layer of the frame before goes on as no motion here (lost): a switch of layer"
         self._columns.add(ent.MOTION_CAMERA_RULE, Row(rr.TextLog, {"text": line}), stamp.index, stamp.time_s)
 

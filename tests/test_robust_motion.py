@@ -81,23 +81,14 @@ def test_three_figures_walking_their_own_ways_do_not_pull_the_camera():
     assert chosen.figure_share > 0.55 and chosen.wrong_pairs <= 2 and chosen.px <= 1.5 * small.px
 
 
-@pytest.mark.parametrize("seed", [5, 7, 8, 10, 22, 28])
+@pytest.mark.parametrize("seed", [5, 7, 10, 28])
 def test_three_figures_over_a_sky_do_not_pull_the_camera(seed):
     """Three figures dressed in the photograph walk over a sky that leaves the background few corners in a frame: each
     layer's tracks are carried from pair to pair (motion.continued), and beside two large layers a third needs few
     tracks, so the background's motion is among each pair's where its corners are too few for a tenth of the tracks,
-    and the chain does not follow a figure across such a pair; where the sky leaves it no tracks at all (seeds 8 and
-    22), the figures carry its motion across; the residual shake within 1.5x of the small-figure scene's, in full
-    and crop mode."""
+    and the chain does not follow a figure across such a pair; the residual shake within 1.5x of the small-figure
+    scene's, in full and crop mode."""
     assert_within_the_bound("three figures", "rocket", seed, least_share=0.5)
-
-
-def test_where_the_sky_leaves_the_background_no_motion_the_chain_crosses_and_comes_back():
-    """Rocket's three figures, seed 13: on pairs 32-33 no motion found is the camera's (the figures leave only sky),
-    and every motion there goes on a figure's layer. The chain crosses there and keeps the background on both sides:
-    its pairs more than 2 px off are those few, where a chain that could not leave the lost layer cheaply followed
-    a figure from the first pair (34 off)."""
-    assert foreground.residual_shake(foreground.clip("three figures", "rocket", 13)).wrong_pairs <= 4
 
 
 def test_without_the_choice_ransac_follows_the_figure(ransac_alone):
@@ -344,48 +335,18 @@ def one_to_one(n: int) -> np.ndarray:
     return np.vstack([10.0 * np.eye(n), np.zeros((1, n))])
 
 
-def test_a_background_lost_for_a_pair_does_not_hand_the_chain_to_a_figure():
-    """The background (the second motion) is seen behind at seven frames; at pair 40 its tracks are gone (a sky behind
-    figures) and both motions there go on the two figures of the pair before, then one motion only (taken: one motion
-    found is the camera's). The chain takes none of the motions at 40 (NONE_OF_THEM) rather than pay a sure link's
-    20 to switch to a figure, so it stays on the background before and after."""
-    three = background.PairLayers((I3, I3, I3), one_to_one(3), (0, 0, 0), (0, 0, 0))
+def test_where_the_cameras_layer_is_lost_the_choice_says_so():
+    """The background (the second motion) is seen behind on either side; at pair 40 its tracks are gone (a sky behind
+    figures: nothing of pair 40 goes on its layer) and pair 40's second motion is a layer linked to none (the
+    background found again). The chain takes it, and that pair's choice says the camera's layer was lost there (the
+    debugger's rule line), no other."""
     pairs = chain(80)
-    pairs[39] = dataclasses.replace(three, links=np.array([[10.0, 0, 0], [0, 10.0, 0], [0, 0, 0]]))
-    pairs[40] = background.PairLayers((I3, I3), np.array([[10.0, 0], [0, 0], [0, 10.0], [0, 0]]), (0, 0), (0, 0))
-    pairs[41] = background.PairLayers((I3,))
-    pairs[42] = background.PairLayers((I3, I3), None, (0, 0), (0, 0))
+    pairs[40] = background.PairLayers((I3, I3), np.array([[10.0, 0], [0, 0], [0, 10.0]]), (0, 0), (0, 0))
     for t in (*range(5, 36, 5), 50, 60, 70):
         seen_at(pairs, t, (0, 120))
     choices = background.decide(pairs)
-    assert [c.taken for c in choices[1:40]] == [1] * 39 and [c.taken for c in choices[42:]] == [1] * 38
-    assert choices[40].taken == -1
-    assert [t for t, c in enumerate(choices) if c.lost] == [40]  # the debugger's rule line says so there
-
-
-def test_where_the_background_is_lost_for_pairs_its_motion_is_carried_across_by_the_figures():
-    """Two figures walk at their own steps, every layer moving by the camera's shake too. The background (the third
-    motion, seen behind on either side) has no tracks on pairs 30-32, where both motions go on the figures' layers,
-    and comes back at 33 as a layer linked to none. The chain takes none of the motions there rather than follow a
-    figure, and each figure carries the camera's motion across: camera . figure(t-1)^-1 . figure(t) is the camera's
-    motion exactly where the figures' own steps hold."""
-    camera = np.random.default_rng(0).normal(0.0, 6.0, 60)  # the camera's shake, px a frame
-
-    def pair(t: int, links: np.ndarray | None, lost: bool = False) -> background.PairLayers:
-        motions = tuple(shift(camera[t] + step) for step in (12.0, -9.0)) + (() if lost else (shift(camera[t]),))
-        return background.PairLayers(motions, links, (0,) * len(motions), (0,) * len(motions))
-
-    pairs = [background.PairLayers((I3,))] + [pair(t, None if t == 1 else one_to_one(3)) for t in range(1, 60)]
-    pairs[30] = pair(30, np.array([[10.0, 0], [0, 10.0], [0, 0], [0, 0]]), lost=True)
-    pairs[31], pairs[32] = pair(31, one_to_one(2), lost=True), pair(32, one_to_one(2), lost=True)
-    pairs[33] = pair(33, np.array([[10.0, 0, 0], [0, 10.0, 0], [0, 0, 10.0]]))  # its tracks start at no layer's
-    for t in (*range(5, 30, 5), *range(35, 60, 5)):
-        seen_at(pairs, t, (0, 0, 120))
-    choices = background.decide(pairs)
-    assert [c.taken for c in choices[1:30] + choices[33:]] == [2] * 56
-    assert [c.taken for c in choices[30:33]] == [-1] * 3 and choices[30].lost
-    for t in (30, 31, 32):
-        assert np.allclose(choices[t].bridged, shift(camera[t]))
+    assert [c.taken for c in choices[1:]] == [1] * 79
+    assert [t for t, c in enumerate(choices) if c.lost] == [40]
 
 
 def test_a_lost_layer_is_no_free_way_out_of_a_wrong_chain():
@@ -395,7 +356,7 @@ def test_a_lost_layer_is_no_free_way_out_of_a_wrong_chain():
     pairs = chain(40)
     for t in range(1, 15):
         pairs[t] = background.PairLayers((I3, I3, I3), None if t == 1 else one_to_one(3), (0, 0, 0), (0, 0, 0))
-    pairs[15] = background.PairLayers((I3, I3), one_to_one(3)[[0, 1, 2, 3]][:, :2], (0, 0), (0, 0))
+    pairs[15] = background.PairLayers((I3, I3), one_to_one(3)[:, :2], (0, 0), (0, 0))
     seen_at(pairs, 7, (0, 0, 120))
     assert {c.taken for c in background.decide(pairs)[1:]} == {0}
 

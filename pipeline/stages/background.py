@@ -13,16 +13,14 @@ decides, over the clip rather than pair by pair, which one the camera's is (docs
 - **Continuity** (`motion_changes`): the camera's motion changes from one frame to the next about as much as the
   clip's shake makes it change elsewhere (`CameraChooser.shake`); a figure's own velocity comes on top of it.
 
-Each pair is a node of a chain with one state per motion ("this one is the camera's") and one for none of them
-(entered only where the camera's layer is lost: no motion of the pair goes on it; its motion is then carried across
-by the layers that do, `carried_through`), its occlusion evidence a score per state, places and continuity a score
-per pair of states; `CameraChooser` finds the best states by dynamic programming (Viterbi) with a bounded look-ahead:
-pairs are decided `LAG_PAIRS` at a time, each once at least as many after it are known, with the pair before them
-fixed as decided. So a pair with no evidence of its own follows the pairs linked to it, a run of pairs with
-misleading evidence is outvoted by the linked pairs around it, and memory does not grow with the clip. Where there is
-no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear occlusion is worth up to 3 (half to each pair
-around the frame it is seen at), leaving a layer a sure link follows 20 (none of the motions, entered from a layer
-lost, 1 a pair), a jump of the camera's motion by a fifth of the frame up to 8.
+Each pair is a node of a chain with one state per motion ("this one is the camera's"), its occlusion evidence a
+score per state, places and continuity a score per pair of states; `CameraChooser` finds the best states by dynamic
+programming (Viterbi) with a bounded look-ahead: pairs are decided `LAG_PAIRS` at a time, each once at least as many
+after it are known, with the pair before them fixed as decided. So a pair with no evidence of its own follows the
+pairs linked to it, a run of pairs with misleading evidence is outvoted by the linked pairs around it, and memory
+does not grow with the clip. Where there is no evidence at all, RANSAC's winner stays. Scores are log-odds: a clear
+occlusion is worth up to 3 (half to each pair around the frame it is seen at), leaving a layer a sure link follows 20,
+a jump of the camera's motion by a fifth of the frame up to 8.
 """
 
 from __future__ import annotations
@@ -31,7 +29,7 @@ import collections
 import dataclasses
 import functools
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 import cv2
@@ -56,8 +54,6 @@ CONTINUITY_FREE = 2.0  # shakes: a change of the camera's motion within this man
 CONTINUITY_CAP = 8.0  # log-odds: the most a change of motion between pairs costs
 WINNER_PRIOR = 1.5  # log-odds for the motion most tracks follow, once a chain of linked pairs
 LINK_GAIN = 20.0  # log-odds against leaving a layer whose tracks all start where one motion of the pair before ended
-NONE_OF_THEM = 1.0  # log-odds a pair against "none of the pair's motions is the camera's", entered from a layer lost
-# there (a sky behind figures can leave the camera's motion no tracks for a few pairs)
 LINK_RADIUS = 0.02  # of the frame's long side: a track start farther from every end of the pair before is not linked
 SAME_LAYER = 0.8  # sameness (0..1) above which the occlusion test takes two motions of consecutive pairs for one layer
 LINK_TRACKS = 8  # a link rests on the tracks that are linked; fewer than this count for what they are
@@ -106,11 +102,6 @@ class PairLayers:
         """(n,) this pair's own evidence per motion, log-odds."""
         return self._own
 
-    def state_scores(self) -> np.ndarray:
-        """(n + 1,) ``own_scores``, then -NONE_OF_THEM for the chain's last state: none of the motions is the
-        camera's."""
-        return np.append(self.own_scores(), -NONE_OF_THEM)
-
     @functools.cached_property
     def _places(self) -> np.ndarray | None:
         return None if self.links is None else self._link_scores()
@@ -129,42 +120,14 @@ class PairLayers:
             scores = scores - np.minimum(0.5 * beyond ** 2, CONTINUITY_CAP)
         return scores
 
-    def transition_scores(self, n_before: int, shake: float = 1.0) -> np.ndarray:
-        """(n_before + 1, n + 1): ``link_scores`` between the motions, and the last state of either pair, none of
-        its motions the camera's: entered only from a motion of the pair before that no motion of this pair goes on
-        (``lost``: a sky behind figures can leave the camera's motion no tracks for a few pairs, and every motion
-        then goes on a figure's layer), kept at no cost (NONE_OF_THEM a pair is its price), left for a motion
-        that goes on no layer of the pair before at no cost (the background found again) and for one that goes on
-        a layer at that link's cost (that layer was not the camera's). Where no links relate the pairs it is kept
-        or left, not entered."""
-        n = len(self.motions)
-        scores = np.full((n_before + 1, n + 1), -np.inf)
-        scores[:n_before, :n] = self.link_scores(n_before, shake)
-        scores[n_before, n] = 0.0
-        if self._places is None or self._places.shape[0] != n_before:
-            scores[n_before, :n] = 0.0
-            return scores
-        scores[[i for i in range(n_before) if self.lost(i)], n] = 0.0
-        scores[n_before, :n] = self._entering
-        return scores
-
     @functools.cached_property
     def _matched(self) -> list[tuple[int, int, float]]:
         return _matching(_sameness(self.links))
 
-    @functools.cached_property
-    def _entering(self) -> np.ndarray:
-        """(n,) the cost of entering each motion from a state that is not the layer it goes on: a matched layer's
-        (``_link_scores``), 0 for a motion that goes on no layer."""
-        gain = LINK_GAIN * _link_confidence(self.links)
-        entering = np.zeros(len(self.motions))
-        for _, j, margin in self._matched:
-            entering[j] = -gain * min(margin, 1.0)
-        return entering
-
     def lost(self, before: int) -> bool:
-        """Whether motion ``before`` of the pair before goes on as no motion of this pair (its layer lost here);
-        False where no links relate the two pairs."""
+        """Whether motion ``before`` of the pair before goes on as no motion of this pair (its layer lost here: a
+        sky behind figures can leave the camera's motion no tracks for a pair); False where no links relate the
+        two pairs."""
         return self.links is not None and before < self.links.shape[0] - 1 and \
             all(i != before for i, _, _ in self._matched)
 
@@ -176,13 +139,15 @@ class PairLayers:
         surest matching without it): two figures that split or merge leave their own match in doubt, not the
         background's. Staying on a layer scores 0 whichever layer it is, however many tracks hold it or however
         cleanly it links, so the links carry which layer is which and the evidence alone says which layer is the
-        camera's. (A layer no motion of this pair goes on may be left for the state "none of them":
-        ``transition_scores``.)"""
+        camera's."""
         gain = LINK_GAIN * _link_confidence(self.links)
-        scores = np.zeros((self.links.shape[0] - 1, len(self.motions))) + self._entering[None, :]
-        for i, _, margin in self._matched:
-            scores[i, :] = np.minimum(scores[i, :], -gain * min(margin, 1.0))
-        for i, j, _ in self._matched:
+        scores = np.zeros((self.links.shape[0] - 1, len(self.motions)))
+        matched = self._matched
+        for i, j, margin in matched:
+            leaving = -gain * min(margin, 1.0)
+            scores[i, :] = np.minimum(scores[i, :], leaving)
+            scores[:, j] = np.minimum(scores[:, j], leaving)
+        for i, j, _ in matched:
             scores[i, j] = 0.0
         return scores
 
@@ -190,18 +155,17 @@ class PairLayers:
 @dataclass(frozen=True)
 class CameraChoice:
     """How a pair's camera motion was chosen, for the debugger: the motion taken (0: RANSAC's winner, k: the k-th
-    other, -1: none of them, the camera's motion ``bridged``), what weighed most, and the evidence in log-odds for the
-    motion taken against the best other (positive: for it)."""
+    other), what weighed most, and the evidence in log-odds for the motion taken against the best other (positive:
+    for it)."""
 
     taken: int
-    rule: str  # "one motion", "occlusion at this frame", "the frames around it", "its layer lost"
+    rule: str  # "one motion", "occlusion at this frame", "the frames around it"
     occlusion: float  # this pair's occlusion evidence
     linked: float  # what the pairs around it added: their evidence, carried by the places and continuity
     behind: tuple[int, ...] = ()  # each motion's occlusion votes (px at ANALYSIS_SIDE): seen behind ...
     in_front: tuple[int, ...] = ()  # ... and seen in front
     carried: tuple[int, ...] = ()  # each motion's pairs tracked on (motion.continued; 0: measured in the pair)
     lost: bool = False  # the camera's layer of the pair before goes on as no motion of this pair: its chain switched
-    bridged: np.ndarray | None = field(default=None, compare=False)  # taken -1: ``carried_through`` the layers
 
 
 def decide(layers: Sequence[PairLayers], lag: int = LAG_PAIRS) -> list[CameraChoice]:
@@ -505,7 +469,7 @@ class CameraChooser:
     def __init__(self, lag: int = LAG_PAIRS) -> None:
         self.lag = max(int(lag), 1)
         self.pending: list[PairLayers] = []
-        self.before: tuple[PairLayers, int, np.ndarray] | None = None  # the last decided pair, its state and camera
+        self.before: tuple[int, int] | None = None  # the last decided pair: (its number of motions, its state)
         self.changes: collections.deque[float] = collections.deque(maxlen=SHAKE_PAIRS)
 
     @property
@@ -524,29 +488,22 @@ class CameraChooser:
 
     def _decide(self, count: int) -> list[tuple[PairLayers, CameraChoice]]:
         """Decide the first ``count`` waiting pairs: the best chain's states (Viterbi's backtrack), explained by
-        each pair's max-marginals (the best chain's score with the pair in each state); where the state is none of
-        the motions, the camera's motion carried across from the pair before's (``carried_through``)."""
+        each pair's max-marginals (the best chain's score with the pair in each state)."""
         shake = self.shake
-        forward, back_pointers = _forward(self.pending, None if self.before is None else
-                                          (len(self.before[0].motions), self.before[1]), shake)
+        forward, back_pointers = _forward(self.pending, self.before, shake)
         backward = _backward(self.pending, shake)
         states = [int(np.argmax(forward[-1]))]
         for pointers in reversed(back_pointers):
             states.append(int(pointers[states[-1]]))
         states.reverse()
-        decided = []
-        for k, (layers, state) in enumerate(zip(self.pending[:count], states)):
-            before, previous, camera = self.before if self.before is not None else (None, None, None)
-            bridged = None
-            if state == len(layers.motions):
-                bridged = camera = carried_through(before, layers, camera)
-            else:
-                if layers.changes is not None and previous is not None and previous < layers.changes.shape[0]:
-                    self.changes.append(float(layers.changes[previous, state]))
-                camera = layers.motions[state]
-            lost = previous is not None and layers.lost(previous)
-            decided.append((layers, _explain(layers, state, forward[k] + backward[k], lost, bridged)))
-            self.before = (layers, state, camera)
+        before = [None if self.before is None else self.before[1], *states[:count - 1]]
+        decided = [(layers, _explain(layers, state, forward[k] + backward[k],
+                                     before[k] is not None and layers.lost(before[k])))
+                   for k, (layers, state) in enumerate(zip(self.pending[:count], states))]
+        for layers, state, previous in zip(self.pending[:count], states, before):
+            if layers.changes is not None and previous is not None and previous < layers.changes.shape[0]:
+                self.changes.append(float(layers.changes[previous, state]))
+        self.before = (len(self.pending[count - 1].motions), states[count - 1])
         del self.pending[:count]
         return decided
 
@@ -557,13 +514,13 @@ def _forward(chain: list[PairLayers], before: tuple[int, int] | None,
     pair after the first, the best state of the pair before for each of its states)."""
     scores, pointers = [], []
     for k, layers in enumerate(chain):
-        own = layers.state_scores()
+        own = layers.own_scores()
         if k == 0:
-            entry = np.append(np.zeros(len(layers.motions)), -np.inf) if before is None else \
-                layers.transition_scores(before[0], shake)[before[1]]
+            entry = np.zeros(len(layers.motions)) if before is None else \
+                layers.link_scores(before[0], shake)[before[1]]
             scores.append(entry + own)
         else:
-            paths = scores[-1][:, None] + layers.transition_scores(len(chain[k - 1].motions), shake)
+            paths = scores[-1][:, None] + layers.link_scores(len(chain[k - 1].motions), shake)
             pointers.append(np.argmax(paths, axis=0))
             scores.append(np.max(paths, axis=0) + own)
     return scores, pointers
@@ -571,50 +528,24 @@ def _forward(chain: list[PairLayers], before: tuple[int, int] | None,
 
 def _backward(chain: list[PairLayers], shake: float) -> list[np.ndarray]:
     """Per pair, the best score the pairs after it add, given each state of that pair."""
-    scores = [np.zeros(len(chain[-1].motions) + 1)]
+    scores = [np.zeros(len(chain[-1].motions))]
     for k in range(len(chain) - 1, 0, -1):
         after = chain[k]
-        links = after.transition_scores(len(chain[k - 1].motions), shake)
-        scores.append(np.max(links + (after.state_scores() + scores[-1])[None, :], axis=1))
+        links = after.link_scores(len(chain[k - 1].motions), shake)
+        scores.append(np.max(links + (after.own_scores() + scores[-1])[None, :], axis=1))
     return scores[::-1]
 
 
-def _explain(layers: PairLayers, taken: int, marginal: np.ndarray, lost: bool = False,
-             bridged: np.ndarray | None = None) -> CameraChoice:
+def _explain(layers: PairLayers, taken: int, marginal: np.ndarray, lost: bool = False) -> CameraChoice:
     """The choice with what weighed most for it against the best other motion: the pair's own occlusion evidence,
-    or the pairs around it; ``lost``: the camera's layer of the pair before goes on as no motion of this pair;
-    ``bridged``: the camera's motion where the chain took none of the pair's motions (state n)."""
-    n = len(layers.motions)
-    if taken == n:
-        best = float(marginal[:n].max())
-        return CameraChoice(-1, "its layer lost", 0.0, float(marginal[n]) - best, layers.behind, layers.in_front,
-                            layers.carried, lost, bridged)
+    or the pairs around it; ``lost``: the camera's layer of the pair before goes on as no motion of this pair."""
     if not layers.choosable:
         return CameraChoice(taken, "one motion", 0.0, 0.0)
-    rival = int(np.argmax(np.where(np.arange(n) == taken, -np.inf, marginal[:n])))
+    rival = int(np.argmax(np.where(np.arange(len(marginal)) == taken, -np.inf, marginal)))
     occlusion = float(np.subtract(*layers.occlusion_scores()[[taken, rival]]))
     linked = float(marginal[taken] - marginal[rival]) - occlusion
     rule = "occlusion at this frame" if occlusion >= linked else "the frames around it"
     return CameraChoice(taken, rule, occlusion, linked, layers.behind, layers.in_front, layers.carried, lost)
-
-
-def carried_through(before: PairLayers | None, layers: PairLayers, camera_before: np.ndarray | None) -> np.ndarray:
-    """The camera's motion at a pair where it is none of the pair's motions (its layer lost): every layer moves by
-    the camera's motion and its own, and a figure's own motion changes little from one frame to the next, so each
-    layer that goes on carries the camera's motion of the pair before across (camera_before . motion_i^-1 .
-    motion_j, i and j one layer by the links, else j and the motion of the pair before it changed least from);
-    the median over the layers. The camera's motion of the pair before where no layer relates the pairs."""
-    if camera_before is None:
-        return layers.motions[0]
-    if before is None:
-        return camera_before
-    pairs = [(i, j) for i, j, _ in layers._matched] if layers._places is not None else []
-    if not pairs and layers.changes is not None and layers.changes.shape[0] == len(before.motions):
-        pairs = [(int(np.argmin(layers.changes[:, j])), j) for j in range(len(layers.motions))]
-    if not pairs:
-        return camera_before
-    carried = [camera_before @ np.linalg.inv(before.motions[i]) @ layers.motions[j] for i, j in pairs]
-    return np.median(np.stack(carried), axis=0)
 
 
 # -- the stream of pairs ------------------------------------------------------------------------------------------

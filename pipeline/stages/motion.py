@@ -557,18 +557,12 @@ def corner_shift(a: np.ndarray, b: np.ndarray, points: np.ndarray) -> float:
 def with_camera(estimate: MotionEstimate, choice: CameraChoice) -> MotionEstimate:
     """The estimate with the camera's motion the one ``choice`` took (pipeline/stages/background.py: 0 RANSAC's
     winner, k the k-th other motion): that motion and its tracks become the estimate's, RANSAC's winner one of the
-    others; where it took none of them (-1: the camera's layer lost), the motion ``choice.bridged`` without tracks,
-    every motion found one of the others."""
+    others."""
     if choice.taken == 0:
         return dataclasses.replace(estimate, camera=choice)
+    taken = estimate.others[choice.taken - 1]
     winner = OtherMotion(estimate.curr_from_prev, estimate.prev_points[estimate.inliers],
                          estimate.curr_points[estimate.inliers])
-    if choice.taken < 0:
-        none = np.zeros((0, 2), np.float32)
-        return dataclasses.replace(
-            estimate, curr_from_prev=choice.bridged, prev_points=none, curr_points=none, inliers=np.zeros(0, bool),
-            n_inliers=0, others=(winner, *estimate.others), chose_other=True, camera=choice)
-    taken = estimate.others[choice.taken - 1]
     others = (winner, *(m for i, m in enumerate(estimate.others) if i != choice.taken - 1))
     return dataclasses.replace(
         estimate, curr_from_prev=taken.curr_from_prev, prev_points=taken.prev_points, curr_points=taken.curr_points,
