@@ -55,6 +55,7 @@ RECORDED_FIELDS: dict[str, dict[str, tuple[str, ...] | Nested | NotRecorded]] = 
         "behind": (ent.MOTION_CAMERA_RULE,),
         "in_front": (ent.MOTION_CAMERA_RULE,),
         "carried": (ent.MOTION_CAMERA_RULE,),
+        "lost": (ent.MOTION_CAMERA_RULE,),
     },
     "PathPlan": {  # on_path, once
         "motion": Nested("MotionPass"),
