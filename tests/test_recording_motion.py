@@ -90,20 +90,26 @@ def test_each_pair_says_which_motion_the_camera_took_and_why(run):
     assert np.allclose(linked, [estimates[t].camera.linked for t in frames.tolist()])
 
 
+def recorded_pass_one(frames, rrd) -> tuple[Recording, dict]:
+    """``frames`` run in mode none with a full-level recording at ``rrd``: the recording, and each pair's estimate."""
+    from pipeline.runtime.source import ArraySource
+    from pipeline.stabilize import stabilize_source
+
+    collector = StageCollector("motion")
+    stabilize_source(ArraySource(frames), None, StabilizeConfig(mode="none"), workers=1,
+                     observer=Observers(RerunRecorder(rrd, level="full", jpeg_quality=None), collector))
+    return Recording.load(rrd), {stamp.index: e for stamp, e in collector.results["motion"]}
+
+
 def test_the_rule_line_names_the_layers_tracked_on(tmp_path):
     """Three figures over a sky: on pairs where a layer of an earlier pair was tracked on and added as a motion
     (motion.continued), the camera's rule line says so of each such motion, with how many pairs."""
     from pipeline.evaluation import foreground
-    from pipeline.runtime.source import ArraySource
-    from pipeline.stabilize import stabilize_source
 
-    video = foreground.clip("three figures", "rocket", 2, n_frames=30)
-    rrd = tmp_path / "sky.rrd"
-    collector = StageCollector("motion")
-    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="none"), workers=1,
-                     observer=Observers(RerunRecorder(rrd, level="full", jpeg_quality=None), collector))
-    lines = {t: text[0] for t, text in rows_at(Recording.load(rrd), ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
-    carried = {stamp.index: [k for k in e.camera.carried if k] for stamp, e in collector.results["motion"]}
+    recording, estimates = recorded_pass_one(foreground.clip("three figures", "rocket", 2, n_frames=30).frames,
+                                             tmp_path / "sky.rrd")
+    lines = {t: text[0] for t, text in rows_at(recording, ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
+    carried = {t: [k for k in e.camera.carried if k] for t, e in estimates.items()}
     assert any(carried.values()), "no layer was tracked on: the test shows nothing"
     for t, counts in carried.items():
         assert lines[t].count("tracked on") == len(counts)
@@ -114,16 +120,11 @@ def test_the_rule_line_says_where_the_cameras_layer_was_lost(tmp_path):
     """Three figures over a sky, seed 13: at a pair where no motion goes on the camera's layer of the pair before
     (background.PairLayers.lost), the chain had to switch layer, and the camera's rule line says so there only."""
     from pipeline.evaluation import foreground
-    from pipeline.runtime.source import ArraySource
-    from pipeline.stabilize import stabilize_source
 
-    video = foreground.clip("three figures", "rocket", 13, n_frames=40)
-    rrd = tmp_path / "lost.rrd"
-    collector = StageCollector("motion")
-    stabilize_source(ArraySource(video.frames), None, StabilizeConfig(mode="none"), workers=1,
-                     observer=Observers(RerunRecorder(rrd, level="full", jpeg_quality=None), collector))
-    lines = {t: text[0] for t, text in rows_at(Recording.load(rrd), ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
-    lost = [stamp.index for stamp, e in collector.results["motion"] if e.camera.lost]
+    recording, estimates = recorded_pass_one(foreground.clip("three figures", "rocket", 13, n_frames=40).frames,
+                                             tmp_path / "lost.rrd")
+    lines = {t: text[0] for t, text in rows_at(recording, ent.MOTION_CAMERA_RULE, "TextLog:text").items()}
+    lost = sorted(t for t, e in estimates.items() if e.camera.lost)
     assert lost, "no layer was lost: the test shows nothing"
     assert [t for t, line in sorted(lines.items()) if "(lost)" in line] == lost
 
@@ -132,13 +133,8 @@ def test_a_frame_without_tracks_shows_none_of_the_frame_before(tmp_path):
     """A black frame has no corners to track: the motion tab shows no tracks there, not the frame before's."""
     video = synthetic.generate(synthetic.SyntheticConfig(n_frames=10, seed=0))
     frames = [np.zeros_like(frame) if t == 6 else frame for t, frame in enumerate(video.frames)]
-    rrd = tmp_path / "black.rrd"
-    from pipeline.runtime.source import ArraySource
-    from pipeline.stabilize import stabilize_source
-
-    stabilize_source(ArraySource(frames), None, StabilizeConfig(mode="none"), workers=1,
-                     observer=RerunRecorder(rrd, level="full", jpeg_quality=None))
-    points = rows_at(Recording.load(rrd), f"{ent.MOTION_FEATURES}/points", "Points2D:positions")
+    recording, _ = recorded_pass_one(frames, tmp_path / "black.rrd")
+    points = rows_at(recording, f"{ent.MOTION_FEATURES}/points", "Points2D:positions")
     assert points[5] and points[6] is None and points[8]
 
 
